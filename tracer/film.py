@@ -1,0 +1,192 @@
+"""The film: per-pixel running statistics, exact merges, and EXR/PNG files.
+
+Per pixel the film holds the sample count, the running mean and Welford's M2 (sum of squared
+deviations from the mean) in float64. Two films merge exactly with Chan et al.'s parallel
+formula, so renders can be resumed, split across processes and summed into references.
+
+EXR layout (``DESIGN.md``): channels ``R,G,B`` = pixel mean and ``variance.R/G/B`` = unbiased
+variance of a single sample's estimate (the variance of the pixel value is that / spp),
+float32, zip. If the counts differ between pixels (a render interrupted mid-pass), a seventh
+channel ``samples`` holds each pixel's count and ``tracer:spp`` is the smallest count.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError
+
+CHANNELS = ("R", "G", "B", "variance.R", "variance.G", "variance.B")
+COUNT_CHANNEL = "samples"
+
+
+@dataclass
+class Film:
+    """Running statistics of ``width * height`` pixels, row-major, row 0 at the top.
+
+    count : (P,) int64 samples per pixel.   mean : (P, 3) float64.   m2 : (P, 3) float64.
+    attributes : header values carried along (``tracer:strategy`` and the like).
+    """
+
+    width: int
+    height: int
+    count: np.ndarray = field(default=None)  # type: ignore[assignment]
+    mean: np.ndarray = field(default=None)  # type: ignore[assignment]
+    m2: np.ndarray = field(default=None)  # type: ignore[assignment]
+    attributes: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = self.width * self.height
+        if self.count is None:
+            self.count = np.zeros(n, dtype=np.int64)
+            self.mean = np.zeros((n, 3))
+            self.m2 = np.zeros((n, 3))
+
+    @property
+    def spp(self) -> int:
+        """Samples in every pixel (the smallest count if they differ)."""
+        return int(self.count.min()) if len(self.count) else 0
+
+    def add_block(self, first_pixel: int, samples: np.ndarray) -> None:
+        """Add ``samples (npix, k, 3)``: k samples for each of pixels first_pixel, ... ."""
+        npix, k, _ = samples.shape
+        mean_b = samples.mean(axis=1)
+        m2_b = np.sum((samples - mean_b[:, None, :]) ** 2, axis=1)
+        self._merge(slice(first_pixel, first_pixel + npix), np.int64(k), mean_b, m2_b)
+
+    def merge(self, other: "Film") -> None:
+        """Fold ``other`` (same resolution) into this film, pixel by pixel, exactly."""
+        if (other.width, other.height) != (self.width, self.height):
+            raise InputError(f"cannot merge a {other.width}x{other.height} film into a "
+                             f"{self.width}x{self.height} one")
+        self._merge(slice(None), other.count, other.mean, other.m2)
+
+    def _merge(self, where: slice, n_b: Any, mean_b: np.ndarray, m2_b: np.ndarray) -> None:
+        # Chan, Golub and LeVeque (1979): combine (n, mean, M2) of two disjoint sample sets.
+        n_a = self.count[where]
+        n_b = np.broadcast_to(n_b, n_a.shape)
+        n = n_a + n_b
+        safe_n = np.where(n > 0, n, 1).astype(np.float64)
+        delta = mean_b - self.mean[where]
+        mean = self.mean[where] + delta * (n_b / safe_n)[:, None]
+        m2 = self.m2[where] + m2_b + delta * delta * (n_a * (n_b / safe_n))[:, None]
+        # Assign only after everything is computed, so Ctrl-C cannot leave a half-merged pixel run.
+        self.mean[where], self.m2[where], self.count[where] = mean, m2, n
+
+    def variance(self) -> np.ndarray:
+        """(P, 3) unbiased variance of one sample's estimate; 0 where count < 2."""
+        denom = np.maximum(self.count - 1, 1).astype(np.float64)[:, None]
+        return np.where((self.count >= 2)[:, None], self.m2 / denom, 0.0)
+
+    def image(self) -> np.ndarray:
+        """(H, W, 3) float64 pixel means."""
+        return self.mean.reshape(self.height, self.width, 3)
+
+    # -----------------------------------------------------------------------------------------
+    # Files
+
+    def write_exr(self, path: str | os.PathLike[str]) -> None:
+        """Write the EXR atomically (temporary file in the same folder, then rename)."""
+        import OpenImageIO as oiio
+
+        uniform = bool(np.all(self.count == self.count[0])) if len(self.count) else True
+        names = list(CHANNELS) + ([] if uniform else [COUNT_CHANNEL])
+        planes = [self.mean, self.variance()]
+        if not uniform:
+            planes.append(self.count[:, None].astype(np.float64))
+        pixels = np.concatenate(planes, axis=1).astype(np.float32).reshape(self.height, self.width, -1)
+        spec = oiio.ImageSpec(self.width, self.height, len(names), "float")
+        spec.channelnames = tuple(names)
+        spec.attribute("compression", "zip")
+        spec.attribute("tracer:spp", int(self.spp))
+        for key, value in self.attributes.items():
+            if key != "tracer:spp":
+                spec.attribute(key, value)
+        _atomic_write(path, lambda tmp: _oiio_write(tmp, spec, pixels))
+
+    def write_png(self, path: str | os.PathLike[str], exposure: float = 0.0) -> None:
+        """An 8-bit sRGB preview: exposure (stops), then the sRGB transfer curve."""
+        write_png(path, self.image(), exposure)
+
+    @classmethod
+    def read_exr(cls, path: str | os.PathLike[str]) -> "Film":
+        """Read an EXR written by :meth:`write_exr`; channels are looked up by name."""
+        import OpenImageIO as oiio
+
+        path = str(path)
+        if not os.path.isfile(path):
+            raise InputError("no such file", path)
+        inp = oiio.ImageInput.open(path)
+        if inp is None:
+            raise InputError(f"cannot read image: {oiio.geterror()}", path)
+        try:
+            spec = inp.spec()
+            data = inp.read_image(0, 0, 0, spec.nchannels, "float")
+        finally:
+            inp.close()
+        if data is None:
+            raise InputError("cannot read image data", path)
+        names = list(spec.channelnames)
+        missing = [c for c in CHANNELS if c not in names]
+        if missing:
+            raise InputError(f"missing channel(s) {', '.join(missing)} (has {', '.join(names)})", path)
+        data = np.asarray(data, dtype=np.float64).reshape(spec.height * spec.width, spec.nchannels)
+        attributes = {a.name: a.value for a in spec.extra_attribs if a.name.startswith("tracer:")}
+        spp = int(attributes.get("tracer:spp", 0))
+        if COUNT_CHANNEL in names:
+            count = np.rint(data[:, names.index(COUNT_CHANNEL)]).astype(np.int64)
+        else:
+            count = np.full(spec.height * spec.width, spp, dtype=np.int64)
+        mean = data[:, [names.index(c) for c in CHANNELS[:3]]]
+        var = data[:, [names.index(c) for c in CHANNELS[3:]]]
+        m2 = var * np.maximum(count - 1, 0)[:, None]
+        return cls(spec.width, spec.height, count, mean, m2, attributes)
+
+
+def write_png(path: str | os.PathLike[str], image: np.ndarray, exposure: float = 0.0) -> None:
+    """Write ``image (H, W, 3)`` linear RGB as an 8-bit sRGB PNG, atomically."""
+    import OpenImageIO as oiio
+
+    x = np.clip(np.nan_to_num(image * 2.0**exposure, nan=0.0), 0.0, 1.0)
+    # sRGB transfer function (IEC 61966-2-1).
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    pixels = np.ascontiguousarray(np.rint(srgb * 255.0).astype(np.uint8))
+    spec = oiio.ImageSpec(image.shape[1], image.shape[0], pixels.shape[2], "uint8")
+    _atomic_write(path, lambda tmp: _oiio_write(tmp, spec, pixels))
+
+
+def _oiio_write(path: str, spec: Any, pixels: np.ndarray) -> None:
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(path)
+    if out is None:
+        raise InputError(f"cannot write images of this type: {oiio.geterror()}", path)
+    ok = out.open(path, spec) and out.write_image(pixels)
+    error = out.geterror()
+    out.close()
+    if not ok:
+        raise InputError(f"cannot write: {error}", path)
+
+
+def _atomic_write(path: str | os.PathLike[str], write) -> None:
+    """Call ``write(tmp)`` on a temporary file beside ``path`` (same extension, so the image
+    library picks the right format), then rename it over ``path``: never a torn file."""
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputError("output folder does not exist", str(folder))
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=folder)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, target)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
