@@ -1,0 +1,219 @@
+"""The command line: bad input gives exit status 2 and one clear line; renders write the EXR
+contract; the image does not depend on the thread count."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from tracer.cli import main
+from tracer.estimators import Strategy
+from tracer.film import CHANNELS, Film
+from tracer.render import RenderSettings, render
+from tracer.scene import load_scene
+
+GOOD = """
+[camera]
+origin = [0.0, 1.0, 3.0]
+target = [0.0, 0.5, 0.0]
+up = [0.0, 1.0, 0.0]
+fov = 40.0
+width = 16
+height = 12
+
+[materials.white]
+type = "diffuse"
+reflectance = [0.7, 0.7, 0.7]
+
+[materials.metal]
+type = "roughconductor"
+alpha = 0.1
+reflectance = [0.9, 0.9, 0.9]
+
+[[shapes]]
+type = "quad"
+origin = [-1.0, 0.0, -1.0]
+edge1 = [0.0, 0.0, 2.0]
+edge2 = [2.0, 0.0, 0.0]
+material = "white"
+
+[[shapes]]
+type = "quad"
+origin = [-0.2, 1.5, -0.2]
+edge1 = [0.4, 0.0, 0.0]
+edge2 = [0.0, 0.0, 0.4]
+emission = [5.0, 5.0, 5.0]
+
+[[shapes]]
+type = "sphere"
+center = [0.3, 0.3, 0.0]
+radius = 0.3
+subdivisions = 1
+material = "metal"
+"""
+
+
+def _mutate(old: str, new: str) -> str:
+    assert old in GOOD, old
+    return GOOD.replace(old, new, 1)
+
+
+PLY_NAN = """ply
+format ascii 1.0
+element vertex 3
+property float x
+property float y
+property float z
+element face 1
+property list uchar int vertex_indices
+end_header
+0 0 0
+1 nan 0
+0 1 0
+3 0 1 2
+"""
+
+# (scene text, extra files, fragments the message must contain)
+BAD_SCENES = {
+    "bad toml": ("[camera\norigin = 1", {}, ["not valid TOML"]),
+    "unknown top-level key": (GOOD + "\n[fog]\ndensity = 1\n", {}, ["fog", "unknown key"]),
+    "unknown camera key": (_mutate("fov = 40.0", "fov = 40.0\nfocal = 3"), {}, ["camera.focal"]),
+    "unknown shape type": (_mutate('type = "sphere"', 'type = "cylinder"'), {}, ["shapes[2].type", "cylinder"]),
+    "unknown material type": (_mutate('type = "diffuse"', 'type = "plastic"'), {},
+                              ["materials.white.type", "plastic"]),
+    "unknown light type": (GOOD + '\n[[lights]]\ntype = "spot"\nposition = [0,1,0]\nintensity = [1,1,1]\n',
+                           {}, ["lights[0].type", "spot"]),
+    "wrong length": (_mutate("origin = [0.0, 1.0, 3.0]", "origin = [0.0, 1.0]"), {},
+                     ["camera.origin", "3 numbers"]),
+    "wrong type": (_mutate("fov = 40.0", 'fov = "wide"'), {}, ["camera.fov", "a number"]),
+    "negative emission": (_mutate("emission = [5.0, 5.0, 5.0]", "emission = [5.0, -1.0, 5.0]"), {},
+                          ["shapes[1].emission", ">= 0"]),
+    "non-finite number": (_mutate("fov = 40.0", "fov = nan"), {}, ["camera.fov", "finite"]),
+    "infinite vertex": (_mutate("origin = [-1.0, 0.0, -1.0]", "origin = [-1.0, inf, -1.0]"), {},
+                        ["shapes[0].origin", "finite"]),
+    "negative radius": (_mutate("radius = 0.3", "radius = -0.3"), {}, ["shapes[2].radius"]),
+    "reflectance above one": (_mutate("reflectance = [0.7, 0.7, 0.7]", "reflectance = [1.7, 0.7, 0.7]"),
+                              {}, ["materials.white.reflectance", "<= 1"]),
+    "zero alpha": (_mutate("alpha = 0.1", "alpha = 0.0"), {}, ["materials.metal.alpha"]),
+    "unknown material": (_mutate('material = "white"', 'material = "snow"'), {},
+                         ["shapes[0].material", "snow"]),
+    "missing mesh": (GOOD + '\n[[shapes]]\ntype = "mesh"\nfile = "nowhere.ply"\n', {},
+                     ["shapes[3].file", "not found"]),
+    "unreadable mesh": (GOOD + '\n[[shapes]]\ntype = "mesh"\nfile = "junk.ply"\n',
+                        {"junk.ply": "this is not a mesh\n"}, ["shapes[3].file", "junk.ply"]),
+    "mesh with NaN vertex": (GOOD + '\n[[shapes]]\ntype = "mesh"\nfile = "nan.ply"\n',
+                             {"nan.ply": PLY_NAN}, ["shapes[3].file", "non-finite vertex"]),
+    "camera target at origin": (_mutate("target = [0.0, 0.5, 0.0]", "target = [0.0, 1.0, 3.0]"), {},
+                                ["camera.target", "degenerate"]),
+    "camera up along view": (_mutate("up = [0.0, 1.0, 0.0]", "up = [0.0, -0.5, -3.0]"), {},
+                             ["camera.up", "parallel"]),
+    "absurd resolution": (_mutate("width = 16", "width = 30000").replace("height = 12", "height = 30000"),
+                          {}, ["camera.width/height", "GiB"]),
+    "zero width": (_mutate("width = 16", "width = 0"), {}, ["camera.width"]),
+    "missing camera": ("[materials.a]\ntype = 'mirror'\nreflectance = [1, 1, 1]\n", {},
+                       ["camera", "missing"]),
+    "shapes not an array": (GOOD.replace("[[shapes]]", "[shapesx]", 1).replace("[[shapes]]", "[[shapesy]]")
+                            .replace("[shapesx]", "[shapes]"), {}, ["shapes"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_SCENES))
+def test_bad_scene_exits_2_with_one_clear_line(case, tmp_path, capsys):
+    """Each way of breaking SCENE_FORMAT.md gives status 2 and one stderr line naming the file
+    and the key, with no traceback, and writes no output file."""
+    text, files, fragments = BAD_SCENES[case]
+    scene = tmp_path / "broken.toml"
+    scene.write_text(text)
+    for name, content in files.items():
+        (tmp_path / name).write_text(content)
+    out = tmp_path / "out.exr"
+    status = main(["render", str(scene), "-o", str(out), "--spp", "1", "--quiet"])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert "broken.toml" in lines[0] and "Traceback" not in err
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+    assert list(tmp_path.glob("out*")) == []
+
+
+def test_missing_scene_file(tmp_path, capsys):
+    assert main(["render", str(tmp_path / "nope.toml"), "--quiet"]) == 2
+    assert "nope.toml: no such scene file" in capsys.readouterr().err
+
+
+def test_bad_option_and_process_exit_status(tmp_path):
+    """The installed entry point exits 2 on a bad option and on a broken file, with no traceback."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[camera]\n")
+    for args in (["render", "--spp", "0"], ["render", str(bad)]):
+        proc = subprocess.run([sys.executable, "-m", "tracer", *args], capture_output=True, text=True,
+                              cwd=tmp_path, timeout=120)
+        assert proc.returncode == 2, proc.stderr
+        assert "Traceback" not in proc.stderr
+
+
+def test_render_writes_exr_contract_and_png(tmp_path, capsys):
+    """A CLI render writes the six channels, the header attributes and a PNG of the same stem."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    out = tmp_path / "r.exr"
+    assert main(["render", str(scene), "-o", str(out), "--spp", "3", "--strategy", "light",
+                 "--seed", "9", "--threads", "2"]) == 0
+    assert "16x12, 3 spp, light" in capsys.readouterr().err
+    spec = oiio.ImageInput.open(str(out)).spec()
+    assert tuple(spec.channelnames) == CHANNELS
+    assert spec.getattribute("compression") == "zip"
+    expected = {"tracer:spp": 3, "tracer:strategy": "light", "tracer:heuristic": "none", "tracer:seed": 9,
+                "tracer:scene": str(scene)}
+    for key, value in expected.items():
+        assert spec.getattribute(key) == value, key
+    assert spec.getattribute("tracer:seconds") > 0.0
+    assert spec.getattribute("tracer:version")
+    png = oiio.ImageBuf(str(tmp_path / "r.png"))
+    assert (png.spec().width, png.spec().height) == (16, 12)
+
+
+def test_default_scene_renders_from_any_directory(tmp_path):
+    """Without SCENE, the veach_mis scene shipped in the package renders (here tiny and fast)."""
+    proc = subprocess.run([sys.executable, "-m", "tracer", "render", "--spp", "1", "--width", "8",
+                           "--height", "8", "--quiet"], capture_output=True, text=True, cwd=tmp_path,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "veach_mis_mis.exr").is_file() and (tmp_path / "veach_mis_mis.png").is_file()
+
+
+@pytest.mark.parametrize("strategy", [Strategy("mis"), Strategy("light"),
+                                      Strategy("mis", "balance", 2, 2, one_sample=True)])
+def test_same_seed_same_image_whatever_threads(tmp_path, strategy):
+    """Bit-identical films for 1 and 2 threads: batches (small, so there are many) draw from
+    generators keyed by their own position and merge in a fixed order."""
+    scene_path = tmp_path / "s.toml"
+    scene_path.write_text(GOOD)
+    scene = load_scene(scene_path)
+    films = []
+    for threads in (1, 2):
+        settings = RenderSettings(spp=5, seed=11, threads=threads, batch_lanes=100)
+        films.append(render(scene, strategy, settings).film)
+    assert np.array_equal(films[0].mean, films[1].mean)
+    assert np.array_equal(films[0].m2, films[1].m2)
+    other_seed = render(scene, strategy, RenderSettings(spp=5, seed=12, threads=2, batch_lanes=100)).film
+    assert not np.array_equal(films[0].mean, other_seed.mean)
+
+
+def test_resumed_samples_are_fresh(tmp_path):
+    """first_sample shifts the random streams: a second run with first_sample = spp gives
+    different samples, and merging both equals one film with the pooled samples' count."""
+    scene_path = tmp_path / "s.toml"
+    scene_path.write_text(GOOD)
+    scene = load_scene(scene_path)
+    a = render(scene, Strategy("mis"), RenderSettings(spp=4, seed=1, threads=1)).film
+    b = render(scene, Strategy("mis"), RenderSettings(spp=4, seed=1, threads=1, first_sample=4)).film
+    assert not np.array_equal(a.mean, b.mean)
+    a.merge(b)
+    assert a.spp == 8 and isinstance(a, Film)

@@ -1,0 +1,99 @@
+"""The film's statistics and files: Welford/Chan merges and the EXR contract."""
+
+from __future__ import annotations
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from tracer.errors import InputError
+from tracer.film import CHANNELS, Film
+
+
+def _random_film(rng, width=5, height=3, k=7, offset=0.0) -> tuple[Film, np.ndarray]:
+    samples = rng.normal(offset, 2.0, size=(width * height, k, 3))
+    film = Film(width, height)
+    film.add_block(0, samples)
+    return film, samples
+
+
+def test_merge_equals_pooled_statistics():
+    """Merging films (in blocks of different sizes) gives the count, mean and unbiased variance
+    of the pooled samples, to float64 rounding (1e-12 relative): Chan's formula is exact."""
+    rng = np.random.default_rng(0)
+    a, sa = _random_film(rng, k=32, offset=1.0)
+    b, sb = _random_film(rng, k=32, offset=-3.0)
+    c = Film(5, 3)
+    c.add_block(0, sb[:, :5])
+    c.add_block(0, sb[:, 5:])
+    a.merge(c)
+    pooled = np.concatenate([sa, sb], axis=1)
+    assert np.all(a.count == 64)
+    np.testing.assert_allclose(a.mean, pooled.mean(axis=1), rtol=1e-12)
+    np.testing.assert_allclose(a.variance(), pooled.var(axis=1, ddof=1), rtol=1e-12)
+
+
+def test_partial_blocks_track_per_pixel_counts():
+    """Blocks that cover part of the image leave per-pixel counts that differ; spp reports the
+    smallest, and the other pixels keep all their samples."""
+    film = Film(4, 1)
+    film.add_block(0, np.ones((4, 2, 3)))
+    film.add_block(1, np.full((2, 3, 3), 2.0))
+    assert film.count.tolist() == [2, 5, 5, 2]
+    assert film.spp == 2
+    np.testing.assert_allclose(film.mean[1], (2 * 1.0 + 3 * 2.0) / 5)
+
+
+def test_exr_round_trip(tmp_path):
+    """Write and read back: channel names, float32 values of mean and variance, attributes."""
+    rng = np.random.default_rng(1)
+    film, _ = _random_film(rng, width=6, height=4, k=9)
+    film.attributes.update({"tracer:strategy": "mis", "tracer:heuristic": "power", "tracer:seed": 5,
+                            "tracer:seconds": 1.5, "tracer:scene": "x.toml", "tracer:version": "0.1"})
+    path = tmp_path / "out.exr"
+    film.write_exr(path)
+
+    inp = oiio.ImageInput.open(str(path))
+    spec = inp.spec()
+    inp.close()
+    assert tuple(spec.channelnames) == CHANNELS
+    assert spec.format == oiio.FLOAT
+    assert spec.getattribute("compression") == "zip"
+    assert spec.getattribute("tracer:spp") == 9
+
+    back = Film.read_exr(path)
+    assert (back.width, back.height) == (6, 4)
+    assert np.all(back.count == 9)
+    np.testing.assert_allclose(back.mean, film.mean.astype(np.float32), rtol=1e-7)
+    np.testing.assert_allclose(back.variance(), film.variance().astype(np.float32), rtol=1e-6)
+    for key in ("tracer:strategy", "tracer:heuristic", "tracer:seed", "tracer:scene", "tracer:version"):
+        assert back.attributes[key] == film.attributes[key]
+    assert back.attributes["tracer:seconds"] == pytest.approx(1.5)
+    # No temporary files are left beside the output.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.exr"]
+
+
+def test_exr_with_uneven_counts_keeps_them(tmp_path):
+    """An interrupted render (uneven counts) writes a 'samples' channel and reads back exactly."""
+    film = Film(3, 1)
+    film.add_block(0, np.ones((3, 2, 3)))
+    film.add_block(0, np.ones((1, 1, 3)))
+    film.write_exr(tmp_path / "a.exr")
+    back = Film.read_exr(tmp_path / "a.exr")
+    assert back.count.tolist() == [3, 2, 2]
+
+
+def test_merge_refuses_other_resolution():
+    with pytest.raises(InputError, match="cannot merge"):
+        Film(2, 2).merge(Film(3, 2))
+
+
+def test_png_preview(tmp_path):
+    """The preview is 8-bit RGB of the film's size; 0.5 linear maps to sRGB 188."""
+    film = Film(2, 2)
+    film.add_block(0, np.full((4, 1, 3), 0.5))
+    film.write_png(tmp_path / "p.png")
+    buf = oiio.ImageBuf(str(tmp_path / "p.png"))
+    assert (buf.spec().width, buf.spec().height, buf.spec().nchannels) == (2, 2, 3)
+    assert buf.spec().format == oiio.UINT8
+    assert round(buf.get_pixels(oiio.FLOAT)[0, 0, 0] * 255) == 188
