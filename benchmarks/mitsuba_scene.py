@@ -4,8 +4,11 @@ This is an independent reference for cross-checking `tracer`: it reads the scene
 own code (tomllib + trimesh) and never imports the `tracer` package, so that a misreading of
 the contract in one place does not silently show up in both renderers.
 
-Conventions, and how they line up with Mitsuba 3 (checked numerically, see the report that
-came with this file and `mitsuba_render.py`):
+Conventions, and how they line up with Mitsuba 3.  Each was checked numerically when this
+module was written: rendered pixels against the contract's camera formula (to Monte Carlo
+noise, and not mirrored), an emitter with flipped winding (black), flat against smooth shading
+of an icosphere, `roughconductor.eval` against the contract's GGX formula, and a diffuse plane
+under a square light against Lambert's polygon formula.
 
 - Triangles.  Ours: front = normalize((v1 - v0) x (v2 - v0)), shading normal = that face
   normal.  Mitsuba's `Mesh::face_normal` is the same cross product, and a mesh built without
@@ -38,6 +41,9 @@ import trimesh
 
 # Optional-key defaults of the contract.
 DEFAULT_SUBDIVISIONS = 3
+
+# Mitsuba's microfacet distribution clamps alpha from below to this value.
+MIN_MITSUBA_ALPHA = 1e-4
 
 
 def _mi():
@@ -123,7 +129,11 @@ def _bsdf_dict(material: dict | None, name: str) -> dict:
         elif kind == "roughconductor":
             # material='none' makes Mitsuba's conductor Fresnel term exactly 1; the colour is
             # carried by specular_reflectance.  Mitsuba's GGX uses alpha as given and the
-            # separable Smith G1(wi) G1(wo), matching the contract.
+            # separable Smith G1(wi) G1(wo), matching the contract.  Mitsuba clamps alpha to
+            # at least 1e-4 internally, so smaller alphas would silently differ: refuse them.
+            if float(material["alpha"]) < MIN_MITSUBA_ALPHA:
+                raise ValueError(f"{where}.alpha: {material['alpha']} is below Mitsuba's "
+                                 f"internal minimum {MIN_MITSUBA_ALPHA}; no faithful reference")
             inner = {
                 "type": "roughconductor",
                 "distribution": "ggx",
@@ -144,7 +154,7 @@ def _bsdf_dict(material: dict | None, name: str) -> dict:
 
 
 def _make_mesh(mi, name: str, vertices: np.ndarray, faces: np.ndarray, bsdf: dict,
-               emission=None) -> "mi.Mesh":
+               emission=None):
     """An `mi.Mesh` with face normals only, the given BSDF and an optional area emitter.
 
     vertices: (n, 3) float, faces: (m, 3) int.  Building the mesh in memory (instead of writing

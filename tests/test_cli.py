@@ -217,3 +217,28 @@ def test_resumed_samples_are_fresh(tmp_path):
     assert not np.array_equal(a.mean, b.mean)
     a.merge(b)
     assert a.spp == 8 and isinstance(a, Film)
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+def test_interrupt_writes_what_was_rendered(tmp_path, signum):
+    """Ctrl-C (or kill) mid-render: exit status 130, the EXR holds every finished sample with its
+    true spp (fewer than asked), and no temporary file is left behind."""
+    import signal
+    import time
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    out = tmp_path / "r.exr"
+    # A non-interactive shell may start us with SIGINT ignored; Python then keeps it ignored.
+    proc = subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(out),
+                             "--spp", "10000000", "--threads", "2"], stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    time.sleep(4.0)
+    proc.send_signal(getattr(signal, signum))
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "interrupted at" in err and "Traceback" not in err
+    film = Film.read_exr(out)
+    assert 0 < film.spp < 10_000_000
+    assert film.attributes["tracer:spp"] == film.spp
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.exr", "r.png", "s.toml"]

@@ -78,6 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    _terminate_like_ctrl_c()
     try:
         return args.run(args)
     except InputError as exc:
@@ -86,6 +87,19 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("tracer: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+
+
+def _terminate_like_ctrl_c() -> None:
+    """SIGTERM (kill, a batch scheduler's time limit) stops a render as Ctrl-C does: what was
+    rendered is written. Only possible from the main thread."""
+    import signal
+    import threading
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, handler)
 
 
 def cmd_render(args: argparse.Namespace) -> int:
