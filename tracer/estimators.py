@@ -107,6 +107,11 @@ class Shading:
                        self.wo[idx], self.bsdf.take(idx))
 
 
+def _repeated(sp: Shading, count: int) -> Shading:
+    """Each shading point ``count`` times in a row (one lane per sample); no copy for 1."""
+    return sp if count == 1 else sp.take(np.repeat(np.arange(len(sp.lane)), count))
+
+
 class DirectLighting:
     """The estimator for one scene and strategy, shared by all render threads (read-only)."""
 
@@ -171,13 +176,11 @@ class DirectLighting:
                              self._direction_technique(sp.take(dirs_idx), 1.0 - c_light, c_light, rng))
             return
         if n_light:
-            rep = np.repeat(np.arange(m), n_light)
-            self._accumulate(radiance, sp.lane[rep],
-                             self._light_technique(sp.take(rep), n_light, n_dir, rng))
+            rep = _repeated(sp, n_light)
+            self._accumulate(radiance, rep.lane, self._light_technique(rep, n_light, n_dir, rng))
         if n_dir:
-            rep = np.repeat(np.arange(m), n_dir)
-            self._accumulate(radiance, sp.lane[rep],
-                             self._direction_technique(sp.take(rep), n_dir, n_light, rng))
+            rep = _repeated(sp, n_dir)
+            self._accumulate(radiance, rep.lane, self._direction_technique(rep, n_dir, n_light, rng))
 
     @staticmethod
     def _accumulate(radiance: np.ndarray, lanes: np.ndarray, contribution: np.ndarray) -> None:
