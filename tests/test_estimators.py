@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from stats import sidak, t_test_mean
 from tracer.estimators import DirectLighting, Strategy
 from tracer.scene import load_scene
+
+from stats import sidak, t_test_mean
 
 RHO = 0.5
 LE = np.array([4.0, 2.0, 1.0])
@@ -202,8 +203,10 @@ def test_furnace_rough_conductor_energy(write_scene, tmp_path, alpha):
     assert np.all(ref_mean - 1.0 < sps.t.isf(0.01, len(ref) - 1) * np.sqrt(ref_var) + 1e-12)
     level = sidak(3 * 4 * 3)
     for i, name in enumerate(["uniform", "cosine", "light", "mis"]):
-        radiance = DirectLighting(scene, Strategy(name)).radiance(origins, dirs, np.random.default_rng(20 + i))
-        z = (radiance.mean(axis=0) - ref_mean) / np.sqrt(radiance.var(axis=0, ddof=1) / len(radiance) + ref_var)
+        rng = np.random.default_rng(20 + i)
+        radiance = DirectLighting(scene, Strategy(name)).radiance(origins, dirs, rng)
+        se = np.sqrt(radiance.var(axis=0, ddof=1) / len(radiance) + ref_var)
+        z = (radiance.mean(axis=0) - ref_mean) / se
         assert np.all(2 * sps.norm.sf(np.abs(z)) > level), (name, radiance.mean(axis=0), ref_mean)
 
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import textwrap
 
-import chi2
 import numpy as np
 import pytest
 from scipy import integrate, stats
@@ -25,6 +24,8 @@ from tracer import bsdf, warp
 from tracer.embree import RayCaster
 from tracer.lights import LightSampler
 from tracer.scene import load_scene
+
+import chi2
 
 N_SAMPLES = 1_000_000
 GRID = (40, 80)  # (polar, phi) cells

@@ -17,10 +17,11 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from stats import image_mean_and_se, sidak
 from tracer.estimators import Strategy
 from tracer.render import RenderSettings, render
 from tracer.scene import load_scene
+
+from stats import image_mean_and_se, sidak
 
 SCENES = Path(__file__).resolve().parent.parent / "tracer" / "scenes"
 

@@ -18,24 +18,23 @@ EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a number >= 1, got {value}")
-    return value
+def _int_at_least(lo: int):
+    """An argparse type: a whole number >= lo, with a message that says what was wrong."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+        if value < lo:
+            raise argparse.ArgumentTypeError(f"expected a number >= {lo}, got {value}")
+        return value
+
+    return parse
 
 
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {value}")
-    return value
+_positive_int = _int_at_least(1)
+_count = _int_at_least(0)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,7 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", help="output EXR path (default: SCENE_STRATEGY.exr here); "
                    "the PNG preview goes beside it")
     r.add_argument("--spp", type=_positive_int, help="samples per pixel (default: the scene's, else 64)")
-    r.add_argument("--strategy", choices=STRATEGIES, help="sampling strategy (default: the scene's, else mis)")
+    r.add_argument("--strategy", choices=STRATEGIES,
+                   help="sampling strategy (default: the scene's, else mis)")
     r.add_argument("--heuristic", choices=HEURISTICS, default="power", help="MIS heuristic (default power)")
     r.add_argument("--light-samples", type=_count, default=1, metavar="N",
                    help="light samples per camera sample (light, mis; default 1)")
