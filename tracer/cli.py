@@ -37,9 +37,28 @@ _positive_int = _int_at_least(1)
 _count = _int_at_least(0)
 
 
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
+    if not value > 0.0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
+    return value
+
+
+def _crop(text: str) -> tuple[int, int, int, int]:
+    parts = text.split(",")
+    try:
+        x, y, w, h = (int(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y,W,H (4 whole numbers), got '{text}'") from None
+    if x < 0 or y < 0 or w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"expected X,Y >= 0 and W,H >= 1, got '{text}'")
+    return x, y, w, h
+
+
 def build_parser() -> argparse.ArgumentParser:
-    from .lights import SELECTIONS
-    from .mis import HEURISTICS
     from .scene import STRATEGIES
 
     parser = argparse.ArgumentParser(
@@ -55,24 +74,85 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--spp", type=_positive_int, help="samples per pixel (default: the scene's, else 64)")
     r.add_argument("--strategy", choices=STRATEGIES,
                    help="sampling strategy (default: the scene's, else mis)")
-    r.add_argument("--heuristic", choices=HEURISTICS, default="power", help="MIS heuristic (default power)")
-    r.add_argument("--light-samples", type=_count, default=1, metavar="N",
-                   help="light samples per camera sample (light, mis; default 1)")
-    r.add_argument("--bsdf-samples", type=_count, default=1, metavar="M",
-                   help="direction samples per camera sample (uniform, cosine, bsdf, mis; default 1)")
-    r.add_argument("--one-sample", action="store_true",
-                   help="one-sample MIS: each camera sample picks light or BSDF with probability N:M")
-    r.add_argument("--light-selection", choices=SELECTIONS, default="power",
-                   help="how to pick the light to sample (default: in proportion to power)")
-    r.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
-    r.add_argument("--threads", type=_positive_int, default=os.cpu_count() or 1,
-                   help="worker threads (default: all cores); the image does not depend on it")
-    r.add_argument("--width", type=_positive_int, help="override the camera's width in pixels")
-    r.add_argument("--height", type=_positive_int, help="override the camera's height in pixels")
-    r.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure in stops (default 0)")
-    r.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")
+    _add_strategy_options(r)
+    _add_render_options(r)
     r.set_defaults(run=cmd_render)
+
+    ref = sub.add_parser("reference", help="render or grow a high-spp MIS reference",
+                         description="Render a high-spp MIS reference (half-float EXR), or add samples "
+                         "to an existing one with --resume.")
+    ref.add_argument("scene", help="scene file")
+    ref.add_argument("-o", "--output", help="reference EXR (default: SCENE_reference.exr here)")
+    ref.add_argument("--spp", type=_positive_int, default=1024,
+                     help="samples per pixel to add (default 1024)")
+    ref.add_argument("--resume", action="store_true",
+                     help="add --spp samples to the existing OUTPUT (fresh random numbers; spp adds up)")
+    ref.add_argument("--float", action="store_true", help="store 32-bit floats instead of half")
+    _add_strategy_options(ref)
+    _add_render_options(ref)
+    ref.set_defaults(run=cmd_reference)
+
+    c = sub.add_parser("compare", help="compare strategies against a reference: images, maps, charts",
+                       description="Render several strategies at equal spp or equal time and compare them "
+                       "with a reference: EXR/PNG per strategy, error and FLIP maps, a labelled grid, "
+                       "efficiency-ratio maps, metrics.json/csv and index.html.")
+    c.add_argument("scene", help="scene file")
+    c.add_argument("--reference", required=True, help="reference EXR (tracer reference)")
+    c.add_argument("--strategies", default=",".join(STRATEGIES),
+                   help="comma-separated strategies (default: all five)")
+    budget = c.add_mutually_exclusive_group(required=True)
+    budget.add_argument("--spp", type=_positive_int, help="equal samples: every strategy renders N spp")
+    budget.add_argument("--time", type=_positive_float, metavar="SECONDS",
+                        help="equal time: every strategy renders for SECONDS")
+    c.add_argument("--out", default="compare", help="output folder (default ./compare)")
+    c.add_argument("--sweep", action="store_true",
+                   help="also: relMSE at spp 1, 2, 4, ... (charts with fitted slopes) and the MIS "
+                   "light:BSDF allocation sweep")
+    c.add_argument("--target", type=_positive_float, default=0.01,
+                   help="relMSE whose time-to-reach is reported by --sweep (default 0.01)")
+    c.add_argument("--crop", action="append", type=_crop, metavar="X,Y,W,H",
+                   help="inset region in pixels (repeatable; default: chosen where strategies differ most)")
+    _add_strategy_options(c)
+    c.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
+    c.add_argument("--threads", type=_positive_int, default=os.cpu_count() or 1, help="worker threads")
+    c.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops (default 0)")
+    c.add_argument("--quiet", action="store_true", help="no progress lines")
+    c.set_defaults(run=cmd_compare)
+
+    m = sub.add_parser("merge", help="merge two renders of the same scene and strategy exactly",
+                       description="Pool the samples of two renders (per-pixel count, mean and variance).")
+    m.add_argument("a", help="first EXR")
+    m.add_argument("b", help="second EXR")
+    m.add_argument("-o", "--output", required=True, help="merged EXR (PNG preview beside it)")
+    m.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure in stops (default 0)")
+    m.add_argument("--quiet", action="store_true", help="no summary line")
+    m.set_defaults(run=cmd_merge)
     return parser
+
+
+def _add_strategy_options(p: argparse.ArgumentParser) -> None:
+    from .lights import SELECTIONS
+    from .mis import HEURISTICS
+
+    p.add_argument("--heuristic", choices=HEURISTICS, default="power", help="MIS heuristic (default power)")
+    p.add_argument("--light-samples", type=_count, default=1, metavar="N",
+                   help="light samples per camera sample (light, mis; default 1)")
+    p.add_argument("--bsdf-samples", type=_count, default=1, metavar="M",
+                   help="direction samples per camera sample (uniform, cosine, bsdf, mis; default 1)")
+    p.add_argument("--one-sample", action="store_true",
+                   help="one-sample MIS: each camera sample picks light or BSDF with probability N:M")
+    p.add_argument("--light-selection", choices=SELECTIONS, default="power",
+                   help="how to pick the light to sample (default: in proportion to power)")
+
+
+def _add_render_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
+    p.add_argument("--threads", type=_positive_int, default=os.cpu_count() or 1,
+                   help="worker threads (default: all cores); the image does not depend on it")
+    p.add_argument("--width", type=_positive_int, help="override the camera's width in pixels")
+    p.add_argument("--height", type=_positive_int, help="override the camera's height in pixels")
+    p.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure in stops (default 0)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -102,68 +182,157 @@ def _terminate_like_ctrl_c() -> None:
         signal.signal(signal.SIGTERM, handler)
 
 
-def cmd_render(args: argparse.Namespace) -> int:
-    from . import scene as scene_mod
+def _strategy_from(args: argparse.Namespace, name: str):
     from .estimators import Strategy
-    from .render import RenderSettings, render
 
-    scene_path = Path(args.scene) if args.scene else scene_mod.default_scene_path()
-    scene = scene_mod.load_scene(scene_path, args.width, args.height)
-    defaults = scene.render_defaults
-    strategy_name = args.strategy or defaults.get("strategy", "mis")
-    spp = args.spp or defaults.get("spp", 64)
     try:
-        strategy = Strategy(strategy_name, args.heuristic, args.light_samples, args.bsdf_samples,
-                            args.one_sample, args.light_selection)
+        return Strategy(name, args.heuristic, args.light_samples, args.bsdf_samples,
+                        args.one_sample, args.light_selection)
     except ValueError as exc:
         raise InputError(str(exc), "command line") from None
-    output = Path(args.output) if args.output else Path(f"{scene.name}_{strategy_name}.exr")
+
+
+def _exr_path(text: str) -> Path:
+    output = Path(text)
     if output.suffix.lower() != ".exr":
         raise InputError("output must end in .exr", str(output))
-    if not output.parent.is_dir() and str(output.parent):
+    if str(output.parent) and not output.parent.is_dir():
         raise InputError("output folder does not exist", str(output.parent))
+    return output
 
-    result = render(scene, strategy, RenderSettings(spp=spp, seed=args.seed, threads=args.threads),
-                    progress=not args.quiet)
+
+def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, exposure: float,
+            half: bool = False) -> int:
+    """Write the EXR and PNG of a render, report it on stderr, and return the exit status."""
     film = result.film
-    film.attributes.update(render_attributes(scene, strategy, args.seed, result.seconds))
     png = output.with_suffix(".png")
-    film.write_exr(output)
-    film.write_png(png, args.exposure)
-
+    film.write_exr(output, half=half)
+    film.write_png(png, exposure)
     if result.nonfinite:
         print(f"tracer: warning: {result.nonfinite} samples were NaN or infinite and were set to 0",
               file=sys.stderr)
-    if not args.quiet or result.interrupted:
+    if not quiet or result.interrupted:
         rate = result.samples / max(result.seconds, 1e-9)
-        note = f" (interrupted at {film.spp} spp of {spp})" if result.interrupted else ""
-        print(f"{scene.name}: {film.width}x{film.height}, {film.spp} spp, {describe(strategy)}{note}: "
+        note = f" (interrupted: {result.samples // (film.width * film.height)} of {asked_spp} spp added)" \
+            if result.interrupted else ""
+        print(f"{scene.name}: {film.width}x{film.height}, {film.spp} spp, {strategy.label}{note}: "
               f"{result.seconds:.2f} s, {rate / 1e6:.2f} M samples/s -> {output}, {png}",
               file=sys.stderr)
     return EXIT_INTERRUPTED if result.interrupted else 0
 
 
-def describe(strategy) -> str:
-    """A short label such as ``mis (power, 1 light + 1 bsdf)``."""
-    if strategy.name == "mis":
-        mode = "one-sample, " if strategy.one_sample else ""
-        return (f"mis ({mode}{strategy.heuristic}, {strategy.light_samples} light + "
-                f"{strategy.bsdf_samples} bsdf)")
-    count = strategy.light_count or strategy.direction_count
-    return strategy.name if count == 1 else f"{strategy.name} (x{count})"
+def cmd_render(args: argparse.Namespace) -> int:
+    from . import scene as scene_mod
+    from .render import RenderSettings, render, render_attributes
+
+    scene_path = Path(args.scene) if args.scene else scene_mod.default_scene_path()
+    scene = scene_mod.load_scene(scene_path, args.width, args.height)
+    defaults = scene.render_defaults
+    strategy = _strategy_from(args, args.strategy or defaults.get("strategy", "mis"))
+    spp = args.spp or defaults.get("spp", 64)
+    output = _exr_path(args.output or f"{scene.name}_{strategy.name}.exr")
+    settings = RenderSettings(spp=spp, seed=args.seed, threads=args.threads)
+    result = render(scene, strategy, settings, progress=not args.quiet)
+    result.film.attributes.update(render_attributes(scene, strategy, settings, result))
+    return _finish(result, scene, strategy, output, spp, args.quiet, args.exposure)
 
 
-def render_attributes(scene, strategy, seed: int, seconds: float) -> dict[str, object]:
-    """EXR header attributes of a render (``DESIGN.md``); tracer:spp is added by the film."""
-    return {
-        "tracer:strategy": strategy.name,
-        "tracer:heuristic": strategy.heuristic if strategy.name == "mis" else "none",
-        "tracer:light_samples": int(strategy.light_count),
-        "tracer:bsdf_samples": int(strategy.direction_count),
-        "tracer:one_sample": int(strategy.one_sample),
-        "tracer:light_selection": strategy.light_selection,
-        "tracer:seed": int(seed),
-        "tracer:seconds": float(seconds),
-        "tracer:scene": str(scene.path),
-        "tracer:version": __version__,
-    }
+def cmd_reference(args: argparse.Namespace) -> int:
+    from . import scene as scene_mod
+    from .film import Film, sample_range
+    from .render import RenderSettings, render, render_attributes
+
+    scene = scene_mod.load_scene(args.scene, args.width, args.height)
+    strategy = _strategy_from(args, "mis")
+    output = _exr_path(args.output or f"{scene.name}_reference.exr")
+    film, seed, first, seconds, earliest = None, args.seed, 0, 0.0, 0
+    if args.resume:
+        if not output.is_file():
+            raise InputError("--resume: no reference to resume", str(output))
+        film = Film.read_exr(output)
+        if (film.width, film.height) != (scene.camera.width, scene.camera.height):
+            raise InputError(f"--resume: the reference is {film.width}x{film.height}, the scene "
+                             f"{scene.camera.width}x{scene.camera.height}", str(output))
+        if film.attributes.get("tracer:strategy") != "mis":
+            raise InputError("--resume: not an MIS reference", str(output))
+        # Same seed, later sample indices: fresh random numbers that never repeat earlier ones.
+        seed, first = int(film.attributes.get("tracer:seed", 0)), sample_range(film)[1]
+        earliest = sample_range(film)[0]
+        seconds = float(film.attributes.get("tracer:seconds", 0.0))
+    settings = RenderSettings(spp=args.spp, seed=seed, threads=args.threads, first_sample=first)
+    result = render(scene, strategy, settings, film=film, progress=not args.quiet)
+    result.film.attributes.update(render_attributes(scene, strategy, settings, result))
+    result.film.attributes["tracer:seconds"] = seconds + result.seconds
+    result.film.attributes["tracer:first_sample"] = earliest
+    return _finish(result, scene, strategy, output, args.spp, args.quiet, args.exposure,
+                   half=not args.float)
+
+
+def cmd_merge(args: argparse.Namespace) -> int:
+    from .film import Film, exr_is_half, merge_renders
+
+    output = _exr_path(args.output)
+    a, b = Film.read_exr(args.a), Film.read_exr(args.b)
+    if (a.width, a.height) != (b.width, b.height):
+        raise InputError(f"cannot merge a {a.width}x{a.height} render with a {b.width}x{b.height} one",
+                         args.b)
+    merged = merge_renders(a, b)
+    half = all(exr_is_half(p) for p in (args.a, args.b))
+    merged.write_exr(output, half=half)
+    merged.write_png(output.with_suffix(".png"), args.exposure)
+    if not args.quiet:
+        print(f"merged {a.spp} + {b.spp} spp -> {merged.spp} spp: {output}", file=sys.stderr)
+    return 0
+
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from . import report
+    from .compare import ALLOCATIONS, Comparison
+    from .estimators import Strategy
+    from .film import Film
+    from .scene import STRATEGIES, load_scene
+
+    names = [n.strip() for n in args.strategies.split(",") if n.strip()]
+    unknown = [n for n in names if n not in STRATEGIES]
+    if unknown or not names:
+        raise InputError(f"--strategies: unknown strategy '{unknown[0] if unknown else ''}' "
+                         f"(expected some of {', '.join(STRATEGIES)})", "command line")
+    reference = Film.read_exr(args.reference)
+    scene = load_scene(args.scene, reference.width, reference.height)
+    for x, y, w, h in args.crop or []:
+        if x + w > reference.width or y + h > reference.height:
+            raise InputError(f"--crop {x},{y},{w},{h} leaves the {reference.width}x{reference.height} image",
+                             "command line")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError("exists and is not a folder", str(out))
+    comparison = Comparison(scene, reference, args.seed, args.threads, progress=not args.quiet)
+
+    def run(strategy):
+        if args.time:
+            return comparison.equal_time(strategy, args.time)
+        return comparison.equal_spp(strategy, args.spp)
+
+    mode = report.describe_mode(args.spp, args.time)
+    if not args.quiet:
+        print(f"{scene.name}: {mode['description']} at {reference.width}x{reference.height}", file=sys.stderr)
+    runs = [run(_strategy_from(args, name)) for name in names]
+    sweep, allocation = [], []
+    if args.sweep:
+        for name in names:
+            sweep += comparison.convergence(_strategy_from(args, name), max_spp=args.spp, budget=args.time)
+        allocation = [run(Strategy("mis", args.heuristic, n_light, n_bsdf,
+                                   light_selection=args.light_selection))
+                      for n_light, n_bsdf in ALLOCATIONS]
+    document = report.make_report(out, scene.name, args.reference, reference, runs, mode, sweep, allocation,
+                                  args.crop, args.exposure, args.target)
+    if not args.quiet:
+        width = max(len(r["name"]) for r in document["results"])
+        print(f"\n{'strategy':<{width}}  {'spp':>6} {'seconds':>8} {'relMSE':>10} {'efficiency':>11}",
+              file=sys.stderr)
+        for r in document["results"]:
+            print(f"{r['name']:<{width}}  {r['spp']:>6} {r['seconds']:>8.2f} {r['relmse']:>10.4g} "
+                  f"{r['efficiency']:>11.4g}", file=sys.stderr)
+        print(f"-> {out / 'index.html'}", file=sys.stderr)
+    return 0

@@ -73,6 +73,15 @@ class Strategy:
             raise ValueError(f"strategy {self.name!r} with these counts takes no samples")
 
     @property
+    def label(self) -> str:
+        """A short description such as ``mis (power, 1 light + 1 bsdf)``."""
+        if self.name == "mis":
+            mode = "one-sample, " if self.one_sample else ""
+            return f"mis ({mode}{self.heuristic}, {self.light_samples} light + {self.bsdf_samples} bsdf)"
+        count = self.light_count or self.direction_count
+        return self.name if count == 1 else f"{self.name} (x{count})"
+
+    @property
     def light_count(self) -> int:
         return self.light_samples if self.name in ("light", "mis") else 0
 

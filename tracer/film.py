@@ -91,8 +91,12 @@ class Film:
     # -----------------------------------------------------------------------------------------
     # Files
 
-    def write_exr(self, path: str | os.PathLike[str]) -> None:
-        """Write the EXR atomically (temporary file in the same folder, then rename)."""
+    def write_exr(self, path: str | os.PathLike[str], half: bool = False) -> None:
+        """Write the EXR atomically (temporary file in the same folder, then rename).
+
+        ``half`` stores 16-bit floats (3 significant digits): half the size, for references
+        whose own error is far below what they are compared with.
+        """
         import OpenImageIO as oiio
 
         uniform = bool(np.all(self.count == self.count[0])) if len(self.count) else True
@@ -100,8 +104,9 @@ class Film:
         planes = [self.mean, self.variance()]
         if not uniform:
             planes.append(self.count[:, None].astype(np.float64))
-        pixels = np.concatenate(planes, axis=1).astype(np.float32).reshape(self.height, self.width, -1)
-        spec = oiio.ImageSpec(self.width, self.height, len(names), "float")
+        pixels = np.ascontiguousarray(np.concatenate(planes, axis=1), dtype=np.float32)
+        pixels = pixels.reshape(self.height, self.width, -1)
+        spec = oiio.ImageSpec(self.width, self.height, len(names), "half" if half else "float")
         spec.channelnames = tuple(names)
         spec.attribute("compression", "zip")
         spec.attribute("tracer:spp", int(self.spp))
@@ -143,20 +148,79 @@ class Film:
             count = np.rint(data[:, names.index(COUNT_CHANNEL)]).astype(np.int64)
         else:
             count = np.full(spec.height * spec.width, spp, dtype=np.int64)
-        mean = data[:, [names.index(c) for c in CHANNELS[:3]]]
-        var = data[:, [names.index(c) for c in CHANNELS[3:]]]
+        mean = np.ascontiguousarray(data[:, [names.index(c) for c in CHANNELS[:3]]])
+        var = np.ascontiguousarray(data[:, [names.index(c) for c in CHANNELS[3:]]])
         m2 = var * np.maximum(count - 1, 0)[:, None]
         return cls(spec.width, spec.height, count, mean, m2, attributes)
 
 
-def write_png(path: str | os.PathLike[str], image: np.ndarray, exposure: float = 0.0) -> None:
-    """Write ``image (H, W, 3)`` linear RGB as an 8-bit sRGB PNG, atomically."""
+def merge_renders(a: Film, b: Film) -> Film:
+    """Merge render ``b`` into render ``a`` (both read from EXRs) after checking that they are
+    renders of the same scene, resolution and strategy with independent random numbers."""
+    for key in ("tracer:strategy", "tracer:heuristic", "tracer:light_samples", "tracer:bsdf_samples",
+                "tracer:one_sample", "tracer:light_selection"):
+        if a.attributes.get(key) != b.attributes.get(key):
+            raise InputError(f"cannot merge renders with different {key}: "
+                             f"{a.attributes.get(key)!r} and {b.attributes.get(key)!r}")
+    scene_a, scene_b = a.attributes.get("tracer:scene"), b.attributes.get("tracer:scene")
+    if scene_a and scene_b and Path(scene_a).name != Path(scene_b).name:
+        raise InputError(f"cannot merge renders of different scenes: {scene_a} and {scene_b}")
+    if a.attributes.get("tracer:seed") == b.attributes.get("tracer:seed"):
+        range_a, range_b = sample_range(a), sample_range(b)
+        if range_a[0] < range_b[1] and range_b[0] < range_a[1]:
+            raise InputError(
+                f"the two renders used the same seed and sample indices ({range_a[0]}-{range_a[1] - 1} "
+                f"and {range_b[0]}-{range_b[1] - 1}): they hold the same samples, so merging them would "
+                "count each twice; render one with another --seed")
+    merged = Film(a.width, a.height, a.count.copy(), a.mean.copy(), a.m2.copy(), dict(a.attributes))
+    merged.merge(b)
+    (first_a, next_a), (first_b, next_b) = sample_range(a), sample_range(b)
+    merged.attributes["tracer:first_sample"] = int(min(first_a, first_b))
+    merged.attributes["tracer:next_sample"] = int(max(next_a, next_b))
+    merged.attributes["tracer:seconds"] = float(a.attributes.get("tracer:seconds", 0.0)) + float(
+        b.attributes.get("tracer:seconds", 0.0))
+    return merged
+
+
+def exr_is_half(path: str | os.PathLike[str]) -> bool:
+    """Whether an EXR stores 16-bit floats (merges of half references stay half)."""
     import OpenImageIO as oiio
 
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise InputError(f"cannot read image: {oiio.geterror()}", str(path))
+    try:
+        return inp.spec().format == oiio.HALF
+    finally:
+        inp.close()
+
+
+def sample_range(film: Film) -> tuple[int, int]:
+    """(first, next) sample indices a render drew with its seed; files from before this
+    attribute existed count as 0 .. spp."""
+    first = int(film.attributes.get("tracer:first_sample", 0))
+    return first, int(film.attributes.get("tracer:next_sample", first + film.spp))
+
+
+def to_srgb8(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """Linear RGB ``(H, W, 3)`` -> 8-bit sRGB: exposure (stops), the sRGB curve, rounding."""
     x = np.clip(np.nan_to_num(image * 2.0**exposure, nan=0.0), 0.0, 1.0)
     # sRGB transfer function (IEC 61966-2-1).
     srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-    pixels = np.ascontiguousarray(np.rint(srgb * 255.0).astype(np.uint8))
+    return np.rint(srgb * 255.0).astype(np.uint8)
+
+
+def write_png(path: str | os.PathLike[str], image: np.ndarray, exposure: float = 0.0,
+              srgb: bool = False) -> None:
+    """Write ``image (H, W, 3)`` as an 8-bit PNG, atomically: linear RGB through
+    :func:`to_srgb8`, or, with ``srgb``, values already display-encoded in [0, 1]."""
+    import OpenImageIO as oiio
+
+    if srgb:
+        pixels = np.rint(np.clip(image, 0.0, 1.0) * 255.0).astype(np.uint8)
+    else:
+        pixels = to_srgb8(image, exposure)
+    pixels = np.ascontiguousarray(pixels)
     spec = oiio.ImageSpec(image.shape[1], image.shape[0], pixels.shape[2], "uint8")
     _atomic_write(path, lambda tmp: _oiio_write(tmp, spec, pixels))
 

@@ -68,6 +68,31 @@ class RenderResult:
     interrupted: bool
 
 
+def render_attributes(scene: Scene, strategy: Strategy, settings: RenderSettings,
+                      result: RenderResult) -> dict[str, object]:
+    """EXR header attributes of a render (``DESIGN.md``); ``tracer:spp`` is the film's own.
+
+    ``first_sample``/``next_sample`` bound the sample indices drawn with ``seed``, so that
+    a resumed render or a merge can make sure no random numbers are used twice.
+    """
+    from . import __version__
+
+    return {
+        "tracer:strategy": strategy.name,
+        "tracer:heuristic": strategy.heuristic if strategy.name == "mis" else "none",
+        "tracer:light_samples": int(strategy.light_count),
+        "tracer:bsdf_samples": int(strategy.direction_count),
+        "tracer:one_sample": int(strategy.one_sample),
+        "tracer:light_selection": strategy.light_selection,
+        "tracer:seed": int(settings.seed),
+        "tracer:first_sample": int(settings.first_sample),
+        "tracer:next_sample": int(settings.first_sample + settings.spp),
+        "tracer:seconds": float(result.seconds),
+        "tracer:scene": str(scene.path),
+        "tracer:version": __version__,
+    }
+
+
 def plan_batches(width: int, height: int, spp: int, first_sample: int = 0,
                  batch_lanes: int = DEFAULT_BATCH_LANES) -> list[Batch]:
     """Cut ``width * height`` pixels x ``spp`` samples into batches, pass by pass.

@@ -1,0 +1,234 @@
+"""References, merges and strategy comparisons: exact statistics, metric formulas, files."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from tracer import compare as compare_mod
+from tracer import metrics
+from tracer.cli import main
+from tracer.compare import Comparison, fit_convergence, time_to_reach
+from tracer.estimators import Strategy
+from tracer.film import Film, merge_renders
+from tracer.render import RenderResult, RenderSettings, render, render_attributes
+from tracer.scene import load_scene
+
+SCENES = Path(__file__).resolve().parent.parent / "tracer" / "scenes"
+
+
+def test_metric_formulas_on_known_arrays():
+    """mse, relmse, variance and efficiency by hand on 2 pixels."""
+    reference = np.array([[1.0, 0.0, 2.0], [0.0, 0.0, 0.0]])
+    image = np.array([[1.5, 0.1, 2.0], [0.0, -0.2, 0.0]])
+    assert metrics.mse(image, reference) == pytest.approx((0.25 + 0.01 + 0.04) / 6)
+    expected_rel = (0.25 / 1.01 + 0.01 / 0.01 + 0.04 / 0.01) / 6
+    assert metrics.relmse(image, reference) == pytest.approx(expected_rel)
+    film = Film(2, 1)
+    film.add_block(0, np.array([[[0.0, 0.0, 0.0], [2.0, 2.0, 2.0]], [[1.0, 1.0, 1.0], [1.0, 1.0, 1.0]]]))
+    # Pixel 0: sample variance 2, over 2 samples -> 1; pixel 1: 0. Mean over pixels and channels: 0.5.
+    assert metrics.variance(film) == pytest.approx(0.5)
+    assert metrics.efficiency(0.5, 4.0) == pytest.approx(0.5)
+    assert metrics.efficiency(0.0, 1.0) == float("inf")
+
+
+def test_efficiency_ratio_map_signs():
+    """A strategy with 4x less squared error at equal time is 2 stops (log2 4) more efficient;
+    twice the time halves that advantage; pixels with no error in either are 0."""
+    err_a = np.full((6, 6, 3), 1.0)
+    err_b = np.full((6, 6, 3), 4.0)
+    err_a[:, :3] = err_b[:, :3] = 0.0
+    ratio = metrics.efficiency_ratio_map(err_a, 1.0, err_b, 1.0, radius=0)
+    assert np.allclose(ratio[:, 3:], 2.0) and np.allclose(ratio[:, :3], 0.0)
+    assert np.allclose(metrics.efficiency_ratio_map(err_a, 2.0, err_b, 1.0, radius=0)[:, 3:], 1.0)
+
+
+def test_convergence_fit_and_time_to_target():
+    """On exact 1/spp data the fitted slope is -1 and the time to a target is read off the line."""
+    points = [{"spp": s, "seconds": 0.1 * s, "relmse": 1.0 / s} for s in (1, 2, 4, 8, 16, 32)]
+    slope, _ = fit_convergence(points, "spp")
+    assert slope == pytest.approx(-1.0)
+    seconds, extrapolated = time_to_reach(points, 0.1)
+    assert seconds == pytest.approx(1.0) and not extrapolated
+    seconds, extrapolated = time_to_reach(points, 0.01)
+    assert seconds == pytest.approx(10.0) and extrapolated
+
+
+def _scene():
+    return load_scene(SCENES / "cornell.toml", 24, 16)
+
+
+def test_merge_of_two_32_spp_renders_equals_the_pooled_samples():
+    """Sample indices 0-31 and 32-63 merged hold exactly the samples of one 64-spp render (with one
+    sample per pixel per batch, batches draw the same numbers either way), so count, mean and
+    variance agree to float64 rounding; through EXR files and `tracer merge`, to float32."""
+    scene = _scene()
+    strategy = Strategy("mis")
+    one = RenderSettings(spp=64, seed=3, threads=2, batch_lanes=64)
+    whole = render(scene, strategy, one).film
+    halves = []
+    for first in (0, 32):
+        settings = RenderSettings(spp=32, seed=3, threads=2, batch_lanes=64, first_sample=first)
+        result = render(scene, strategy, settings)
+        result.film.attributes.update(render_attributes(scene, strategy, settings, result))
+        halves.append(result.film)
+    merged = merge_renders(*halves)
+    assert np.all(merged.count == 64)
+    np.testing.assert_allclose(merged.mean, whole.mean, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(merged.variance(), whole.variance(), rtol=1e-9, atol=1e-15)
+    assert merged.attributes["tracer:first_sample"] == 0 and merged.attributes["tracer:next_sample"] == 64
+
+
+def test_merge_command_and_its_refusals(tmp_path, capsys):
+    """`tracer merge` adds spp and refuses renders that share random numbers or strategies differ."""
+    scene = str(SCENES / "cornell.toml")
+    common = ["--width", "12", "--height", "8", "--spp", "4", "--quiet"]
+    assert main(["render", scene, "-o", str(tmp_path / "a.exr"), "--seed", "1", *common]) == 0
+    assert main(["render", scene, "-o", str(tmp_path / "b.exr"), "--seed", "2", *common]) == 0
+    assert main(["render", scene, "-o", str(tmp_path / "l.exr"), "--strategy", "light", *common]) == 0
+    assert (
+        main(["merge", str(tmp_path / "a.exr"), str(tmp_path / "b.exr"), "-o", str(tmp_path / "ab.exr")]) == 0
+    )
+    a, b, ab = (Film.read_exr(tmp_path / f"{n}.exr") for n in ("a", "b", "ab"))
+    assert ab.spp == 8
+    np.testing.assert_allclose(ab.mean, (a.mean + b.mean) / 2, rtol=1e-6, atol=1e-7)
+    capsys.readouterr()
+    assert (
+        main(["merge", str(tmp_path / "a.exr"), str(tmp_path / "a.exr"), "-o", str(tmp_path / "x.exr")]) == 2
+    )
+    assert "same seed and sample indices" in capsys.readouterr().err
+    assert (
+        main(["merge", str(tmp_path / "a.exr"), str(tmp_path / "l.exr"), "-o", str(tmp_path / "x.exr")]) == 2
+    )
+    assert "different tracer:strategy" in capsys.readouterr().err
+
+
+def test_reference_resume_adds_fresh_samples(tmp_path):
+    """--resume adds spp with new sample indices; the result equals merging the two parts."""
+    scene = str(SCENES / "cornell.toml")
+    out = tmp_path / "ref.exr"
+    common = ["--width", "12", "--height", "8", "--spp", "4", "--quiet", "-o", str(out)]
+    assert main(["reference", scene, *common]) == 0
+    first = Film.read_exr(out)
+    assert main(["reference", scene, *common, "--resume"]) == 0
+    both = Film.read_exr(out)
+    assert both.spp == 8
+    assert both.attributes["tracer:first_sample"] == 0 and both.attributes["tracer:next_sample"] == 8
+    assert not np.allclose(both.mean, first.mean)
+    inp = oiio.ImageInput.open(str(out))
+    assert inp.spec().format == oiio.HALF  # references are stored as half floats
+    inp.close()
+
+
+def test_equal_time_spends_the_budget(monkeypatch):
+    """With a stand-in render whose every spp costs 0.1 s, equal-time mode ends within half a
+    spp's time of the budget (the rule that keeps real runs within a few percent)."""
+
+    def fake_render(scene, strategy, settings, film=None, progress=False, estimator=None):
+        film = film if film is not None else Film(2, 2)
+        film.add_block(0, np.ones((4, settings.spp, 3)))
+        return RenderResult(film, 0.1 * settings.spp, 4 * settings.spp, 0, False)
+
+    monkeypatch.setattr(compare_mod, "render", fake_render)
+    reference = Film(2, 2)
+    reference.add_block(0, np.ones((4, 1, 3)))
+    scene = load_scene(SCENES / "cornell.toml", 2, 2)
+    run = Comparison(scene, reference).equal_time(Strategy("light"), 5.0)
+    assert abs(run.seconds - 5.0) <= 0.05 + 1e-9 and run.spp == 50
+
+
+def test_compare_writes_every_file_and_true_numbers(tmp_path):
+    """End to end at 24x16: every promised file exists, index.html links only to files that
+    exist, and MSE/relMSE in metrics.json match an independent computation from the EXRs."""
+    scene = str(SCENES / "veach_mis.toml")
+    ref = tmp_path / "ref.exr"
+    assert (
+        main(
+            [
+                "reference",
+                scene,
+                "-o",
+                str(ref),
+                "--width",
+                "24",
+                "--height",
+                "16",
+                "--spp",
+                "64",
+                "--quiet",
+                "--float",
+            ]
+        )
+        == 0
+    )
+    out = tmp_path / "cmp"
+    assert (
+        main(
+            ["compare", scene, "--reference", str(ref), "--spp", "4", "--out", str(out), "--sweep", "--quiet"]
+        )
+        == 0
+    )
+    names = ["uniform", "cosine", "bsdf", "light", "mis"]
+    for name in names:
+        for suffix in (".exr", ".png", "_relerr.png", "_flip.png"):
+            assert (out / f"{name}{suffix}").is_file(), name + suffix
+    for file in (
+        "grid.png",
+        "convergence.png",
+        "allocation.png",
+        "metrics.json",
+        "metrics.csv",
+        "index.html",
+        "efficiency_bsdf_vs_light.png",
+        "efficiency_mis_vs_light.png",
+    ):
+        assert (out / file).is_file(), file
+
+    page = (out / "index.html").read_text()
+    links = re.findall(r'(?:src|href)="([^"]+)"', page)
+    assert links and all(not link.startswith(("/", "http")) and (out / link).is_file() for link in links)
+
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["mode"]["kind"] == "equal-spp" and [r["strategy"] for r in doc["results"]] == names
+    assert {"strategy", "heuristic", "spp", "seconds", "mse", "relmse", "variance", "efficiency"} <= set(
+        doc["results"][0]
+    )
+    assert doc["sweep"] and {p["spp"] for p in doc["sweep"]} == {1, 2, 4}
+    assert [(r["light_samples"], r["bsdf_samples"]) for r in doc["allocation"]] == list(
+        compare_mod.ALLOCATIONS
+    )
+
+    def channels(path):
+        buf = oiio.ImageBuf(str(path))
+        names_ = list(buf.spec().channelnames)
+        px = buf.get_pixels(oiio.FLOAT)
+        return px[..., [names_.index(c) for c in "RGB"]].astype(np.float64)
+
+    reference = channels(ref)
+    for row in doc["results"]:
+        image = channels(out / f"{row['strategy']}.exr")
+        assert row["mse"] == pytest.approx(np.mean((image - reference) ** 2), rel=1e-5)
+        assert row["relmse"] == pytest.approx(
+            np.mean((image - reference) ** 2 / (reference**2 + 0.01)), rel=1e-5
+        )
+        assert row["efficiency"] == pytest.approx(1.0 / (row["relmse"] * row["seconds"]), rel=1e-9)
+
+
+def test_compare_rejects_bad_input(tmp_path, capsys):
+    scene = str(SCENES / "cornell.toml")
+    assert main(["compare", scene, "--reference", str(tmp_path / "none.exr"), "--spp", "1"]) == 2
+    assert "none.exr: no such file" in capsys.readouterr().err
+    ref = tmp_path / "r.exr"
+    assert (
+        main(["reference", scene, "-o", str(ref), "--width", "8", "--height", "8", "--spp", "1", "--quiet"])
+        == 0
+    )
+    assert main(["compare", scene, "--reference", str(ref), "--spp", "1", "--strategies", "mis,fast"]) == 2
+    assert "unknown strategy 'fast'" in capsys.readouterr().err
+    assert main(["compare", scene, "--reference", str(ref), "--spp", "1", "--crop", "4,4,8,8"]) == 2
+    assert "leaves the 8x8 image" in capsys.readouterr().err

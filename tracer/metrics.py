@@ -1,0 +1,84 @@
+"""Noise and error measures, one definition everywhere (``DESIGN.md``).
+
+Images are ``(..., 3)`` float arrays of pixel means; the reference R is a high-spp MIS render.
+
+- ``mse`` = mean over pixels and channels of (I - R)^2
+- ``relmse`` = mean over pixels and channels of (I - R)^2 / (R^2 + 0.01)
+- ``variance`` = mean over pixels and channels of the variance of the pixel value
+  (the film's per-sample variance / spp): the error expected without a reference
+- ``efficiency`` = 1 / (relmse x seconds): higher is better at equal time
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .film import Film
+
+RELMSE_EPSILON = 0.01
+
+
+def mse(image: np.ndarray, reference: np.ndarray) -> float:
+    return float(np.mean((image - reference) ** 2))
+
+
+def relative_squared_error(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Per pixel and channel: (I - R)^2 / (R^2 + 0.01), same shape as the inputs."""
+    return (image - reference) ** 2 / (reference**2 + RELMSE_EPSILON)
+
+
+def relmse(image: np.ndarray, reference: np.ndarray) -> float:
+    return float(np.mean(relative_squared_error(image, reference)))
+
+
+def variance(film: Film) -> float:
+    """Mean over pixels and channels of the variance of the pixel value."""
+    counts = np.maximum(film.count, 1)[:, None]
+    return float(np.mean(film.variance() / counts))
+
+
+def efficiency(relmse_value: float, seconds: float) -> float:
+    """1 / (relMSE x seconds); infinite for an exact image."""
+    denom = relmse_value * seconds
+    return float("inf") if denom <= 0.0 else 1.0 / denom
+
+
+def box_blur(image: np.ndarray, radius: int) -> np.ndarray:
+    """Mean over the (2 radius + 1)^2 window around each pixel of an ``(H, W, ...)`` array,
+    the window clipped at the borders. Separable sums of shifted copies: no summed-area table,
+    whose cancellation would turn exact zeros (unlit pixels) into round-off noise."""
+    out = image.astype(np.float64)
+    for axis in (0, 1):
+        n = out.shape[axis]
+        total = np.zeros_like(out)
+        count = np.zeros(n)
+        for shift in range(-radius, radius + 1):
+            lo, hi = max(0, -shift), min(n, n - shift)  # destination rows that have a source
+            if lo >= hi:
+                continue
+            dst = [slice(None)] * out.ndim
+            src = [slice(None)] * out.ndim
+            dst[axis] = slice(lo, hi)
+            src[axis] = slice(lo + shift, hi + shift)
+            total[tuple(dst)] += out[tuple(src)]
+            count[lo:hi] += 1
+        shape = [1] * out.ndim
+        shape[axis] = n
+        out = total / count.reshape(shape)
+    return out
+
+
+def efficiency_ratio_map(error_a: np.ndarray, seconds_a: float, error_b: np.ndarray, seconds_b: float,
+                         radius: int = 3) -> np.ndarray:
+    """Per-pixel log2 of efficiency(a) / efficiency(b), ``(H, W)``.
+
+    ``error_*`` are ``(H, W, 3)`` squared errors against the reference; they are averaged over
+    channels and a (2 radius + 1)^2 window before the ratio (one pixel's squared error is a
+    single noisy draw). Positive: a reaches a given error sooner than b there. Pixels where
+    both errors vanish (black background) are 0.
+    """
+    cost_a = box_blur(error_a.mean(axis=2), radius) * seconds_a
+    cost_b = box_blur(error_b.mean(axis=2), radius) * seconds_b
+    tiny = 1e-30
+    ratio = np.log2((cost_b + tiny) / (cost_a + tiny))
+    return np.where((cost_a <= tiny) & (cost_b <= tiny), 0.0, ratio)
