@@ -129,7 +129,7 @@ class Comparison:
             rel = metrics.relmse(film.mean, self.reference.mean)
             points.append({"strategy": strategy.name, "heuristic": _heuristic(strategy), "spp": spp,
                            "seconds": spent, "relmse": rel, "efficiency": metrics.efficiency(rel, spent)})
-            if budget is not None and spent * 3.0 > budget:  # the next doubling would overshoot
+            if budget is not None and spent * 2.0 > budget:  # the next doubling would overshoot
                 break
             target *= 2
         self._say(f"  sweep {strategy.label}: {len(points)} points up to {spp} spp, {spent:.2f} s")
