@@ -243,3 +243,11 @@ def test_interrupt_writes_what_was_rendered(tmp_path, signum):
     assert 0 < film.spp < 10_000_000
     assert film.attributes["tracer:spp"] == film.spp
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.exr", "r.png", "s.toml"]
+
+
+def test_primer_command_writes_five_figures(tmp_path, capsys):
+    """`tracer primer --out DIR` prints the five tables and writes one figure per exercise."""
+    assert main(["primer", "--out", str(tmp_path)]) == 0
+    assert len(list(tmp_path.glob("primer_*.png"))) == 5
+    out = capsys.readouterr().out
+    assert all(f"{k}. " in out for k in range(1, 6))

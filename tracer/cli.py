@@ -14,6 +14,7 @@ from pathlib import Path
 from . import __version__
 from .errors import InputError
 
+EXIT_CHECK_FAILED = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 
@@ -119,6 +120,29 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--quiet", action="store_true", help="no progress lines")
     c.set_defaults(run=cmd_compare)
 
+    ch = sub.add_parser("check", help="regression-test noise levels and bias against a baseline",
+                        description="Render every baseline entry with its seeds and test that noise did not "
+                        "grow (one-sided Welch t-tests) and the image is unbiased (per-pixel z-tests and an "
+                        "image-mean test against the reference), at a 1%% false-alarm rate for the file.")
+    ch.add_argument("--baseline", default=None,
+                    help="baseline JSON (default renders/noise_baseline.json)")
+    ch.add_argument("--update", action="store_true", help="rewrite the baseline from fresh measurements")
+    ch.add_argument("--out", default="check_failures", help="where the maps of failing entries go")
+    ch.add_argument("--seed-offset", type=_count, default=0,
+                    help="add this to every seed (other random numbers, same statistics)")
+    ch.add_argument("--threads", type=_positive_int, default=os.cpu_count() or 1, help="worker threads")
+    ch.set_defaults(run=cmd_check)
+
+    pr = sub.add_parser("primer", help="Monte Carlo primer: five exercises, each a table and a figure",
+                        description="Run the Monte Carlo primer (inversion method, rejection sampling, "
+                        "importance sampling, MIS, quasi-Monte Carlo): print a table per exercise, each "
+                        "measured value with its standard error against the exact value, and with --out "
+                        "write one PNG figure per exercise.")
+    pr.add_argument("--out", metavar="DIR",
+                    help="folder for the five PNG figures (created if missing; default: tables only)")
+    pr.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
+    pr.set_defaults(run=cmd_primer)
+
     m = sub.add_parser("merge", help="merge two renders of the same scene and strategy exactly",
                        description="Pool the samples of two renders (per-pixel count, mean and variance).")
     m.add_argument("a", help="first EXR")
@@ -167,6 +191,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("tracer: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        # `tracer ... | head`: the reader left; say nothing more (and nothing at exit either).
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 def _terminate_like_ctrl_c() -> None:
@@ -336,3 +364,27 @@ def cmd_compare(args: argparse.Namespace) -> int:
                   f"{r['efficiency']:>11.4g}", file=sys.stderr)
         print(f"-> {out / 'index.html'}", file=sys.stderr)
     return 0
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from .check import DEFAULT_BASELINE, format_table, run_check
+
+    baseline = Path(args.baseline) if args.baseline else DEFAULT_BASELINE
+    result = run_check(baseline, update=args.update, out=Path(args.out), seed_offset=args.seed_offset,
+                       threads=args.threads)
+    if args.update:
+        print(f"baseline written: {baseline} ({len(result.measurements)} entries)", file=sys.stderr)
+        return 0
+    print(format_table(result.verdicts))
+    if result.ok:
+        print(f"check passed: {len(result.measurements)} entries", file=sys.stderr)
+        return 0
+    failing = sorted({v.entry for v in result.verdicts if not v.ok})
+    print(f"check FAILED: {', '.join(failing)}; maps in {args.out}/", file=sys.stderr)
+    return EXIT_CHECK_FAILED
+
+
+def cmd_primer(args: argparse.Namespace) -> int:
+    from .primer import main as primer_main
+
+    return primer_main(args.out, args.seed)
