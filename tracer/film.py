@@ -94,8 +94,8 @@ class Film:
     def write_exr(self, path: str | os.PathLike[str], half: bool = False) -> None:
         """Write the EXR atomically (temporary file in the same folder, then rename).
 
-        ``half`` stores 16-bit floats (3 significant digits): half the size, for references
-        whose own error is far below what they are compared with.
+        ``half`` stores the means as 16-bit floats (3 significant digits), for references whose
+        own error is far below what they are compared with; variances stay 32-bit.
         """
         import OpenImageIO as oiio
 
@@ -108,6 +108,10 @@ class Film:
         pixels = pixels.reshape(self.height, self.width, -1)
         spec = oiio.ImageSpec(self.width, self.height, len(names), "half" if half else "float")
         spec.channelnames = tuple(names)
+        if half:
+            # Half floats only for the means: variances of bright, small emitters exceed the
+            # half range (65504) and would read back as inf.
+            spec.channelformats = (oiio.TypeDesc("half"),) * 3 + (oiio.TypeDesc("float"),) * (len(names) - 3)
         spec.attribute("compression", "zip")
         spec.attribute("tracer:spp", int(self.spp))
         for key, value in self.attributes.items():
@@ -183,14 +187,16 @@ def merge_renders(a: Film, b: Film) -> Film:
 
 
 def exr_is_half(path: str | os.PathLike[str]) -> bool:
-    """Whether an EXR stores 16-bit floats (merges of half references stay half)."""
+    """Whether an EXR stores its means (R, G, B) as 16-bit floats (merges of half references stay half)."""
     import OpenImageIO as oiio
 
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         raise InputError(f"cannot read image: {oiio.geterror()}", str(path))
     try:
-        return inp.spec().format == oiio.HALF
+        spec = inp.spec()
+        formats = list(spec.channelformats) or [spec.format] * spec.nchannels
+        return formats[list(spec.channelnames).index("R")] == oiio.HALF
     finally:
         inp.close()
 

@@ -53,55 +53,47 @@ def run_name(run: Run) -> str:
 # Per-strategy maps
 
 
-def relerr_map(run: Run, reference: Film, path: Path) -> None:
-    """False-colour map of log10 relative squared error (channel mean), fixed range for all."""
+def save_map(values: np.ndarray, path: Path, title: str, label: str, cmap: str = "magma",
+             vmin: float | None = None, vmax: float | None = None) -> None:
+    """A false-colour map of ``values (H, W)`` with a title and a labelled colour bar."""
     plt = _pyplot()
-    rel = metrics.relative_squared_error(run.film.image(), reference.image()).mean(axis=2)
-    fig, ax = plt.subplots(figsize=(4.2, 3.6))
-    im = ax.imshow(np.log10(rel + 1e-12), cmap="magma", vmin=RELERR_RANGE[0], vmax=RELERR_RANGE[1])
-    ax.set_title(f"{run_name(run)}: relative squared error", fontsize=9)
+    fig, ax = plt.subplots(figsize=(4.6, 3.8))
+    im = ax.imshow(values, cmap=cmap, vmin=vmin, vmax=vmax)
+    ax.set_title(title, fontsize=9)
     ax.axis("off")
-    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="log10 (I-R)² / (R²+0.01)")
+    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label=label)
     fig.tight_layout()
     _save_figure(fig, path)
     plt.close(fig)
+
+
+def relerr_map(run: Run, reference: Film, path: Path) -> None:
+    """False-colour map of log10 relative squared error (channel mean), fixed range for all."""
+    rel = metrics.relative_squared_error(run.film.image(), reference.image()).mean(axis=2)
+    save_map(np.log10(rel + 1e-12), path, f"{run_name(run)}: relative squared error",
+             "log10 (I-R)² / (R²+0.01)", vmin=RELERR_RANGE[0], vmax=RELERR_RANGE[1])
 
 
 def flip_map(run: Run, reference: Film, path: Path) -> float:
     """The HDR-FLIP perceptual error map (OpenImageIO's built-in); returns the mean FLIP."""
     import OpenImageIO as oiio
 
-    plt = _pyplot()
     ref_buf = oiio.ImageBuf(np.ascontiguousarray(reference.image(), dtype=np.float32))
     test_buf = oiio.ImageBuf(np.ascontiguousarray(run.film.image(), dtype=np.float32))
     flip = oiio.ImageBufAlgo.FLIP_diff(ref_buf, test_buf).get_pixels(oiio.FLOAT)[..., 0]
-    fig, ax = plt.subplots(figsize=(4.2, 3.6))
-    im = ax.imshow(flip, cmap="magma", vmin=0.0, vmax=1.0)
-    ax.set_title(f"{run_name(run)}: FLIP (mean {flip.mean():.3f})", fontsize=9)
-    ax.axis("off")
-    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="FLIP error")
-    fig.tight_layout()
-    _save_figure(fig, path)
-    plt.close(fig)
+    save_map(flip, path, f"{run_name(run)}: FLIP (mean {flip.mean():.3f})", "FLIP error", vmin=0.0, vmax=1.0)
     return float(flip.mean())
 
 
 def ratio_map(a: Run, b: Run, reference: Film, path: Path) -> dict[str, float]:
     """Per-pixel log2 efficiency ratio of a over b; returns the share of pixels each wins."""
-    plt = _pyplot()
     ref = reference.image()
     err_a = (a.film.image() - ref) ** 2
     err_b = (b.film.image() - ref) ** 2
     ratio = metrics.efficiency_ratio_map(err_a, a.seconds, err_b, b.seconds)
-    fig, ax = plt.subplots(figsize=(4.6, 3.8))
-    im = ax.imshow(ratio, cmap="RdBu", vmin=-RATIO_RANGE, vmax=RATIO_RANGE)
-    ax.set_title(f"efficiency: {run_name(a)} (blue) vs {run_name(b)} (red)", fontsize=9)
-    ax.axis("off")
-    bar = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04)
-    bar.set_label(f"log2 efficiency({run_name(a)}) / efficiency({run_name(b)})")
-    fig.tight_layout()
-    _save_figure(fig, path)
-    plt.close(fig)
+    save_map(ratio, path, f"efficiency: {run_name(a)} (blue) vs {run_name(b)} (red)",
+             f"log2 efficiency({run_name(a)}) / efficiency({run_name(b)})", cmap="RdBu",
+             vmin=-RATIO_RANGE, vmax=RATIO_RANGE)
     lit = ratio != 0.0
     return {"a_wins": float(np.mean(ratio[lit] > 0.0)) if lit.any() else 0.0,
             "b_wins": float(np.mean(ratio[lit] < 0.0)) if lit.any() else 0.0}
