@@ -1,0 +1,128 @@
+"""tracer check: passes on the shipped tree, fails on a noisier or biased estimator.
+
+The noise tests are one-sided Welch t-tests and the bias tests per-pixel and image-mean
+z-tests, all at a 1% false-alarm rate for the whole baseline file (see tracer/check.py); these
+tests show that the bounds are neither so wide that real regressions pass nor so tight that an
+unchanged tree with other random numbers fails.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tracer import lights, mis
+from tracer.check import format_table, load_baseline, run_check, save_baseline
+from tracer.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+BASELINE = ROOT / "renders" / "noise_baseline.json"
+
+
+@pytest.fixture
+def baseline_copy(tmp_path):
+    """The shipped baseline beside a copy of the references, so tests can edit it freely."""
+    shutil.copytree(ROOT / "renders" / "references", tmp_path / "references")
+    path = tmp_path / "baseline.json"
+    shutil.copy(BASELINE, path)
+    return path
+
+
+def _only(path: Path, *names: str) -> list:
+    return [e for e in load_baseline(path) if e.name in names]
+
+
+def test_shipped_tree_passes():
+    """The committed baseline was measured from this tree with these seeds: every entry holds."""
+    result = run_check(BASELINE, stream=None)
+    assert result.ok, format_table(result.verdicts)
+
+
+def test_halved_baseline_noise_fails_with_table_and_maps(baseline_copy, tmp_path):
+    """A baseline that claims half the noise makes the check fail on relMSE and variance, and
+    the failing entry's image, reference, error and p-value maps are written."""
+    entries = load_baseline(baseline_copy)
+    for e in entries:
+        if e.name == "cornell/light":
+            e.relmse, e.relmse_seeds = e.relmse / 2, [x / 2 for x in e.relmse_seeds]
+            e.variance, e.variance_seeds = e.variance / 2, [x / 2 for x in e.variance_seeds]
+    save_baseline(baseline_copy, entries)
+    out = tmp_path / "failures"
+    result = run_check(baseline_copy, out=out, stream=None, entries=_only(baseline_copy, "cornell/light"))
+    failed = {(v.entry, v.measure) for v in result.verdicts if not v.ok}
+    assert failed == {("cornell/light", "relmse"), ("cornell/light", "variance")}
+    table = format_table(result.verdicts)
+    assert "FAIL" in table and "ratio" in table
+    for file in ("image.exr", "reference.exr", "error.png", "pvalue.png"):
+        assert (out / "cornell_light" / file).is_file(), file
+
+
+def test_noisier_estimator_fails(baseline_copy, monkeypatch):
+    """Constant MIS weights (1/2, 1/2) stay unbiased but are far noisier on Veach's plates:
+    the noise test catches it and the image mean stays unbiased. (The per-pixel z-test may
+    flag it too: the estimator becomes so heavy-tailed that its normal approximation fails.)"""
+    monkeypatch.setattr(mis, "weight", lambda heuristic, mine, other: np.where(other > 0, 0.5, 1.0))
+    result = run_check(baseline_copy, stream=None, entries=_only(baseline_copy, "veach_mis/mis-power"))
+    failed = {v.measure for v in result.verdicts if not v.ok}
+    assert "relmse" in failed, format_table(result.verdicts)
+    assert "image mean z" not in failed
+
+
+def test_biased_estimator_fails(baseline_copy, monkeypatch):
+    """A light pdf 10% too large (an image 10% too dark) fails the per-pixel and image-mean
+    bias tests."""
+    original = lights.LightSampler.sample
+
+    def biased(self, u_select, u_point, x):
+        sample = original(self, u_select, u_point, x)
+        sample.pdf *= 1.1
+        return sample
+
+    monkeypatch.setattr(lights.LightSampler, "sample", biased)
+    result = run_check(baseline_copy, stream=None, entries=_only(baseline_copy, "cornell/light"))
+    failed = {v.measure for v in result.verdicts if not v.ok}
+    assert {"pixels passing", "image mean z"} <= failed, format_table(result.verdicts)
+
+
+@pytest.mark.parametrize("offset", [1000, 2000, 3000])
+def test_unchanged_tree_passes_with_other_seeds(offset):
+    """With other random numbers the unchanged tree passes: the tolerances come from the spread
+    over seeds and the reference's error, not from reproducing the baseline bit for bit."""
+    result = run_check(BASELINE, seed_offset=offset, stream=None)
+    assert result.ok, format_table(result.verdicts)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("offset", range(10_000, 30_000, 1000))
+def test_unchanged_tree_passes_with_many_seeds(offset):
+    """Twenty more seed sets (slow): at a 1% family rate a failure here is most likely real."""
+    result = run_check(BASELINE, seed_offset=offset, stream=None)
+    assert result.ok, format_table(result.verdicts)
+
+
+def test_update_and_command_line(baseline_copy, tmp_path, capsys):
+    """--update writes fresh means and spreads; the command then passes (exit 0), prints the
+    table, and a broken baseline exits 2 with one line."""
+    doc = json.loads(baseline_copy.read_text())
+    doc["entries"] = [{k: v for k, v in e.items() if k in ("scene", "strategy", "heuristic", "spp", "seeds")}
+                      for e in doc["entries"] if e["scene"] == "point_light"]
+    baseline_copy.write_text(json.dumps(doc))
+    assert main(["check", "--baseline", str(baseline_copy), "--update", "--threads", "2"]) == 0
+    entries = load_baseline(baseline_copy)
+    assert all(e.relmse > 0 and len(e.relmse_seeds) == len(e.seeds) and e.variance > 0 for e in entries)
+    capsys.readouterr()
+    assert main(["check", "--baseline", str(baseline_copy), "--out", str(tmp_path / "f")]) == 0
+    out = capsys.readouterr().out
+    assert "point_light/light" in out and "relmse" in out and "FAIL" not in out
+
+    bad = copy.deepcopy(doc)
+    bad["entries"][0]["strategy"] = "fast"
+    baseline_copy.write_text(json.dumps(bad))
+    assert main(["check", "--baseline", str(baseline_copy)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "entries[0].strategy" in err[0]
