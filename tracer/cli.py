@@ -143,6 +143,21 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
     pr.set_defaults(run=cmd_primer)
 
+    st = sub.add_parser(
+        "stability",
+        help="every strategy on every known failure case: table, JSON, heat map",
+        description="Run every strategy on the cases where sampling strategies fail (tiny, big, grazing "
+        "and hidden lights, point lights, mirrors, GGX alpha 1e-4, zero-area triangles, scaled scenes, "
+        "sample counts) and check what must hold; exit 1 if anything does not.",
+    )
+    st.add_argument("--out", default="stability", help="folder for stability.json and stability.png")
+    st.add_argument("--spp", type=_positive_int, default=64, help="samples per pixel per strategy")
+    st.add_argument("--reference-spp", type=_positive_int, default=1024,
+                    help="spp of each case's MIS reference (default 1024)")
+    st.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
+    st.add_argument("--threads", type=_positive_int, default=os.cpu_count() or 1, help="worker threads")
+    st.set_defaults(run=cmd_stability)
+
     m = sub.add_parser("merge", help="merge two renders of the same scene and strategy exactly",
                        description="Pool the samples of two renders (per-pixel count, mean and variance).")
     m.add_argument("a", help="first EXR")
@@ -388,3 +403,23 @@ def cmd_primer(args: argparse.Namespace) -> int:
     from .primer import main as primer_main
 
     return primer_main(args.out, args.seed)
+
+
+def cmd_stability(args: argparse.Namespace) -> int:
+    from .stability import Cell, expectations, format_table, run_suite
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError("exists and is not a folder", str(out))
+    doc = run_suite(out, spp=args.spp, seed=args.seed, threads=args.threads, reference_spp=args.reference_spp)
+    print(format_table([Cell(**c) for c in doc["cells"]]))
+    print("\nVeach's bound for balance MIS (variances summed over 144 shading points):")
+    for name, b in doc["veach_bound"].items():
+        technique = b["technique"]
+        print(f"  {name:<22} balance mis {b['mis_balance']:.4g} <= {technique} {b[technique]:.4g} "
+              f"+ mu^2/2 {b['slack']:.4g}")
+    problems = expectations(doc)
+    for problem in problems:
+        print(f"FAIL {problem}")
+    print(f"-> {out / 'stability.json'}, {out / 'stability.png'}", file=sys.stderr)
+    return EXIT_CHECK_FAILED if problems else 0

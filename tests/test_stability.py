@@ -1,0 +1,121 @@
+"""The stability suite: every strategy on every case where some strategy is known to fail.
+
+One run of the suite (64 spp, 32 x 32) is shared by the tests. Bias is judged by a z-test of
+the image mean against a 1024-spp MIS render of the same case, Sidak-corrected over the tested
+cells (1% family false-alarm rate); Veach's bound by a one-sided test on the variance
+estimates' standard errors (from fourth moments), Sidak over the cases.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from tracer.cli import main
+from tracer.estimators import DirectLighting
+from tracer.stability import Cell, cases, expectations, load_case, run_case, run_suite
+
+
+@pytest.fixture(scope="module")
+def suite(tmp_path_factory):
+    out = tmp_path_factory.mktemp("stability")
+    return out, run_suite(out, stream=None)
+
+
+def test_everything_that_must_hold_holds(suite):
+    """Finite everywhere, zero (not NaN) where blind, unbiased where testable, Veach's bound."""
+    _, doc = suite
+    assert expectations(doc) == []
+
+
+def test_suite_covers_the_failure_cases_and_writes_its_files(suite):
+    out, doc = suite
+    names = set(doc["cases"])
+    for required in (
+        "tiny_light",
+        "big_light",
+        "grazing_light",
+        "light_behind",
+        "point_light",
+        "mirror_small_light",
+        "mirror_large_light",
+        "ggx_1e-4_small_light",
+        "ggx_1e-4_large_light",
+        "zero_area_triangles",
+        "scaled_0.001",
+        "scaled_1000",
+        "point_light_4l_4b",
+    ):
+        assert required in names, required
+    assert json.loads((out / "stability.json").read_text())["cells"] == doc["cells"]
+    assert (out / "stability.png").stat().st_size > 10_000
+    cells = [Cell(**c) for c in doc["cells"]]
+    assert all(np.isfinite(c.relmse) and c.nonfinite == 0 for c in cells)
+    # What each technique is known for: light sampling fails under the big light, BSDF sampling
+    # on the tiny one, and MIS stays within a small factor of the better of the two.
+    by = {(c.case, c.strategy): c.relmse for c in cells}
+    assert by[("big_light", "light")] > 100 * by[("big_light", "bsdf")]
+    assert by[("tiny_light", "bsdf")] > 10 * by[("tiny_light", "light")]
+    for case in ("big_light", "tiny_light", "grazing_light", "ggx_1e-4_small_light", "ggx_1e-4_large_light"):
+        best = min(by[(case, "light")], by[(case, "bsdf")])
+        assert by[(case, "mis")] <= 20 * best + 1e-9, case
+
+
+def test_scaled_and_degenerate_cases_match_the_plain_one(suite):
+    """The same light at 1e-3 and 1e3 scale, and with zero-area triangles in both meshes, gives
+    the same relMSE and means (same random numbers, scale-aware ray offsets)."""
+    _, doc = suite
+    cells = {(c["case"], c["strategy"]): c for c in doc["cells"]}
+    for strategy in ("light", "mis", "bsdf"):
+        a = cells[("scaled_0.001", strategy)]
+        for other in ("scaled_1000", "zero_area_triangles"):
+            b = cells[(other, strategy)]
+            np.testing.assert_allclose(b["mean"], a["mean"], rtol=1e-3)
+
+
+def test_expectations_catch_what_would_be_wrong(suite):
+    """The checks can fail: a NaN count, a blind strategy that is not zero, a biased mean and
+    a Veach violation are each reported."""
+    _, doc = suite
+    bad = copy.deepcopy(doc)
+    cells = bad["cells"]
+    next(c for c in cells if c["case"] == "big_light" and c["strategy"] == "mis")["nonfinite"] = 3
+    next(c for c in cells if c["case"] == "point_light" and c["strategy"] == "bsdf")["zero"] = False
+    next(c for c in cells if c["case"] == "grazing_light" and c["strategy"] == "light")["z"] = 9.0
+    bound = bad["veach_bound"]["grazing_light"]
+    bound["mis_balance"] = 10 * (bound["light"] + bound["slack"])
+    problems = "\n".join(expectations(bad))
+    for fragment in (
+        "big_light/mis: not finite",
+        "point_light/bsdf: blind",
+        "grazing_light/light: biased",
+        "grazing_light: balance MIS variance",
+    ):
+        assert fragment in problems, fragment
+
+
+def test_image_that_brightens_with_the_sample_count_is_caught(tmp_path, monkeypatch):
+    """Mitsuba 3's direct integrator once brightened with the number of emitter samples. Inject
+    that bug (light samples not divided by their count): the 4-light-sample point-light case
+    is flagged as biased against the 1 + 1 reference."""
+    original = DirectLighting._light_technique
+
+    def not_divided(self, sp, own, other, rng):
+        return original(self, sp, own, other, rng) * own
+
+    case = next(c for c in cases() if c.name == "point_light_4l_1b")
+    scene = load_case(case, tmp_path)
+    monkeypatch.setattr(DirectLighting, "_light_technique", not_divided)
+    cells = run_case(case, scene)
+    doc = {"cells": [c.__dict__ for c in cells], "veach_bound": {}}
+    problems = "\n".join(expectations(doc))
+    assert "point_light_4l_1b/light: biased" in problems and "point_light_4l_1b/mis: biased" in problems
+
+
+def test_command_line(tmp_path, capsys):
+    assert main(["stability", "--out", str(tmp_path), "--spp", "4", "--reference-spp", "64"]) == 0
+    out = capsys.readouterr().out
+    assert "tiny_light" in out and "Veach's bound" in out and "FAIL" not in out
