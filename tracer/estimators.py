@@ -144,24 +144,24 @@ class DirectLighting:
         radiance = np.zeros((n, 3))
         hits = self.caster.intersect(origins, dirs)
         lane = np.flatnonzero(hits.prim >= 0)
-        prim = hits.prim[lane]
-        s = self.scene
+        g = self.scene.hit_table[hits.prim[lane]]
         wo_world = -dirs[lane]
-        cos_view = np.sum(s.normal[prim] * wo_world, axis=1)
+        cos_view = np.einsum("ij,ij->i", g[:, 9:12], wo_world)
 
         # --- Emitters seen directly (weight 1 in every strategy): front side only.
-        radiance[lane] += np.where((cos_view > 0.0)[:, None], s.emission[prim], 0.0)
+        radiance[lane] = g[:, 12:15] * (cos_view > 0.0)[:, None]
 
         # --- Shading points: surfaces with a material and a defined normal.
-        keep = (s.material[prim] != NONE) & (cos_view != 0.0)
-        lane, prim, wo_world, cos_view = lane[keep], prim[keep], wo_world[keep], cos_view[keep]
+        keep = (g[:, 15] != NONE) & (cos_view != 0.0)
+        if not np.all(keep):
+            lane, g, wo_world, cos_view = lane[keep], g[keep], wo_world[keep], cos_view[keep]
         if len(lane) == 0:
             return radiance
-        x = (s.v0[prim] + hits.u[lane, None] * s.edge1[prim] + hits.v[lane, None] * s.edge2[prim])
-        normal = s.normal[prim] * np.sign(cos_view)[:, None]
+        x = g[:, 0:3] + hits.u[lane, None] * g[:, 3:6] + hits.v[lane, None] * g[:, 6:9]
+        normal = g[:, 9:12] * np.sign(cos_view)[:, None]
         frame = Frame.from_normal(normal)
         shading = Shading(lane, x, x + self.eps * normal, frame, frame.to_local(wo_world),
-                          s.materials.take(s.material[prim]))
+                          self.scene.materials.take(g[:, 15].astype(np.intp)))
         self._direct(shading, radiance, rng)
         return radiance
 
@@ -256,14 +256,20 @@ class DirectLighting:
         value = weight / own
 
         live = np.flatnonzero(np.any(value > 0.0, axis=1))
-        wi_world = sp.frame.take(live).to_world(wi[live])
+        # Rotating every lane and dropping the dead ones is cheaper than gathering the frames of
+        # the live ones when most are live (diffuse surfaces).
+        if 2 * len(live) > m:
+            wi_world = sp.frame.to_world(wi)[live]
+        else:
+            wi_world = sp.frame.take(live).to_world(wi[live])
         hits = self.caster.intersect(sp.origin[live], wi_world)
         found = hits.prim >= 0
         live, wi_world = live[found], wi_world[found]
         prim, dist = hits.prim[found], hits.t[found]
         s = self.scene
-        front = np.sum(s.normal[prim] * wi_world, axis=1) < 0.0
-        emitted = np.where(front[:, None], s.emission[prim], 0.0)
+        g = s.hit_table[prim]
+        front = np.einsum("ij,ij->i", g[:, 9:12], wi_world) < 0.0
+        emitted = g[:, 12:15] * front[:, None]
 
         w = np.ones(len(live))
         if other > 0.0:

@@ -31,10 +31,11 @@ class Frame:
 
     def to_local(self, w: np.ndarray) -> np.ndarray:
         """World ``(n, 3)`` -> local ``(n, 3)``."""
-        return np.stack(
-            [np.sum(w * self.s, axis=1), np.sum(w * self.t, axis=1), np.sum(w * self.n, axis=1)],
-            axis=1,
-        )
+        out = np.empty_like(w)
+        out[:, 0] = np.einsum("ij,ij->i", w, self.s)
+        out[:, 1] = np.einsum("ij,ij->i", w, self.t)
+        out[:, 2] = np.einsum("ij,ij->i", w, self.n)
+        return out
 
     def to_world(self, w: np.ndarray) -> np.ndarray:
         """Local ``(n, 3)`` -> world ``(n, 3)``."""

@@ -45,6 +45,28 @@ class LightSample:
     delta: np.ndarray
 
 
+def _alias_table(pmf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Walker's alias table for ``pmf (K,)`` by Vose's stable construction (Vose 1991): column k
+    keeps itself with probability prob[k] and otherwise gives its alias."""
+    k = len(pmf)
+    prob = np.ones(k)
+    alias = np.arange(k)
+    if k == 0:
+        return prob, alias
+    scaled = pmf * k
+    small = [i for i in range(k) if scaled[i] < 1.0]
+    large = [i for i in range(k) if scaled[i] >= 1.0]
+    while small and large:
+        s, g = small.pop(), large.pop()
+        prob[s], alias[s] = scaled[s], g
+        scaled[g] -= 1.0 - scaled[s]
+        (small if scaled[g] < 1.0 else large).append(g)
+    # What remains is 1 up to rounding: keep those columns whole.
+    for i in small + large:
+        prob[i] = 1.0
+    return prob, alias
+
+
 class LightSampler:
     """The emitters of a scene with their selection distribution."""
 
@@ -74,61 +96,90 @@ class LightSampler:
         total = weight.sum()
         self.count = len(weight)
         self.pmf = weight / total if self.count else weight
-        self.cdf = np.cumsum(self.pmf)
-        if self.count:
-            self.cdf[-1] = 1.0
+        self.alias_prob, self.alias = _alias_table(self.pmf)
         # Selection probability of every scene triangle (0 for non-emitters), for pdf().
         self.pmf_of_triangle = np.zeros(len(scene.faces))
         self.pmf_of_triangle[tri] = self.pmf[: len(tri)]
+        # One row per area candidate, so that a sample gathers its triangle in one go:
+        # v0 (3), edge1 (3), edge2 (3), normal (3), emission (3), selection pmf / area (1).
+        self.area_table = np.concatenate(
+            [
+                scene.v0[tri],
+                scene.edge1[tri],
+                scene.edge2[tri],
+                scene.normal[tri],
+                scene.emission[tri],
+                (self.pmf[: len(tri)] / np.where(scene.area[tri] > 0.0, scene.area[tri], 1.0))[:, None],
+            ],
+            axis=1,
+        )
+
+    def pick(self, u_select: np.ndarray) -> np.ndarray:
+        """Candidate indices ``(n,)`` distributed by ``pmf``, by Walker's alias method (Vose's
+        construction): the integer part of u K picks a column, the fraction decides between the
+        column and its alias. O(1) per sample, unlike a binary search of the CDF."""
+        scaled = u_select * self.count
+        column = np.minimum(scaled.astype(np.int64), self.count - 1)
+        return np.where(scaled - column < self.alias_prob[column], column, self.alias[column])
 
     def sample(self, u_select: np.ndarray, u_point: np.ndarray, x: np.ndarray) -> LightSample:
         """Sample a light for shading points ``x (n, 3)``; ``u_select (n,)``, ``u_point (n, 2)``."""
         n = len(x)
-        wi = np.zeros((n, 3))
-        wi[:, 2] = 1.0
-        dist = np.zeros(n)
-        radiance = np.zeros((n, 3))
-        pdf = np.zeros(n)
-        delta = np.zeros(n, dtype=bool)
         if self.count == 0:
-            return LightSample(wi, dist, radiance, pdf, delta)
-
-        pick = np.minimum(np.searchsorted(self.cdf, u_select, side="right"), self.count - 1)
-        pmf = self.pmf[pick]
+            wi = np.zeros((n, 3))
+            wi[:, 2] = 1.0
+            return LightSample(wi, np.zeros(n), np.zeros((n, 3)), np.zeros(n), np.zeros(n, dtype=bool))
+        pick = self.pick(u_select)
         n_tri = len(self.triangles)
+        if len(self.points) == 0:  # the common case: area lights only, no index arrays needed
+            return self._sample_area(pick, u_point, x)
+        if n_tri == 0:
+            return self._sample_points(pick, x)
+        out = LightSample(
+            np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros(n), np.zeros(n, dtype=bool)
+        )
+        for lanes, part in (
+            (np.flatnonzero(pick < n_tri), self._sample_area),
+            (np.flatnonzero(pick >= n_tri), None),
+        ):
+            if not len(lanes):
+                continue
+            sub = (
+                part(pick[lanes], u_point[lanes], x[lanes])
+                if part is not None
+                else self._sample_points(pick[lanes], x[lanes])
+            )
+            out.wi[lanes], out.dist[lanes], out.radiance[lanes] = sub.wi, sub.dist, sub.radiance
+            out.pdf[lanes], out.delta[lanes] = sub.pdf, sub.delta
+        return out
 
-        area_lanes = np.flatnonzero(pick < n_tri)
-        if len(area_lanes):
-            s = self.scene
-            t = self.triangles[pick[area_lanes]]
-            b = warp.sample_triangle_barycentric(u_point[area_lanes])
-            y = s.v0[t] + b[:, 0:1] * s.edge1[t] + b[:, 1:2] * s.edge2[t]
-            to_light = y - x[area_lanes]
-            d = np.linalg.norm(to_light, axis=1)
-            ok = d > 0.0
-            w = to_light / np.where(ok, d, 1.0)[:, None]
-            cos_light = -np.sum(s.normal[t] * w, axis=1)
-            ok &= cos_light > 0.0  # front side only
-            wi[area_lanes] = np.where(ok[:, None], w, wi[area_lanes])
-            dist[area_lanes] = d
-            radiance[area_lanes] = np.where(ok[:, None], s.emission[t], 0.0)
-            safe_cos = np.where(ok, cos_light, 1.0)
-            pdf[area_lanes] = np.where(ok, pmf[area_lanes] / s.area[t] * d * d / safe_cos, 0.0)
+    def _sample_area(self, pick: np.ndarray, u_point: np.ndarray, x: np.ndarray) -> LightSample:
+        """Points on the picked emissive triangles (``pick`` < number of triangles)."""
+        g = self.area_table[pick]
+        b = warp.sample_triangle_barycentric(u_point)
+        y = g[:, 0:3] + b[:, 0:1] * g[:, 3:6] + b[:, 1:2] * g[:, 6:9]
+        to_light = y - x
+        d2 = np.einsum("ij,ij->i", to_light, to_light)
+        d = np.sqrt(d2)
+        ok = d > 0.0
+        wi = to_light / np.where(ok, d, 1.0)[:, None]
+        cos_light = -np.einsum("ij,ij->i", g[:, 9:12], wi)
+        ok &= cos_light > 0.0  # front side only
+        radiance = g[:, 12:15] * ok[:, None]
+        pdf = np.where(ok, g[:, 15] * d2 / np.where(ok, cos_light, 1.0), 0.0)
+        return LightSample(wi, d, radiance, pdf, np.zeros(len(pick), dtype=bool))
 
-        point_lanes = np.flatnonzero(pick >= n_tri)
-        if len(point_lanes):
-            p = self.points[pick[point_lanes] - n_tri]
-            to_light = self.scene.point_position[p] - x[point_lanes]
-            d = np.linalg.norm(to_light, axis=1)
-            ok = d > 0.0
-            safe_d = np.where(ok, d, 1.0)
-            wi[point_lanes] = np.where(ok[:, None], to_light / safe_d[:, None], wi[point_lanes])
-            dist[point_lanes] = d
-            radiance[point_lanes] = np.where(ok[:, None],
-                                             self.scene.point_intensity[p] / (safe_d * safe_d)[:, None], 0.0)
-            pdf[point_lanes] = np.where(ok, pmf[point_lanes], 0.0)
-            delta[point_lanes] = True
-        return LightSample(wi, dist, radiance, pdf, delta)
+    def _sample_points(self, pick: np.ndarray, x: np.ndarray) -> LightSample:
+        """The picked point lights (``pick`` >= number of triangles): delta samples."""
+        p = self.points[pick - len(self.triangles)]
+        to_light = self.scene.point_position[p] - x
+        d2 = np.einsum("ij,ij->i", to_light, to_light)
+        d = np.sqrt(d2)
+        ok = d > 0.0
+        safe_d = np.where(ok, d, 1.0)
+        wi = to_light / safe_d[:, None]
+        radiance = self.scene.point_intensity[p] / np.where(ok, d2, 1.0)[:, None] * ok[:, None]
+        return LightSample(wi, d, radiance, np.where(ok, self.pmf[pick], 0.0), np.ones(len(pick), dtype=bool))
 
     def pdf(self, prim: np.ndarray, wi: np.ndarray, dist: np.ndarray) -> np.ndarray:
         """Solid-angle pdf with which :meth:`sample` would pick direction ``wi (n, 3)`` that hits

@@ -71,6 +71,11 @@ class Scene:
         self.area = 0.5 * length
         # Zero-area triangles get a zero normal (and zero area): never sampled, shaded black.
         self.normal = cross / np.where(length > 0.0, length, 1.0)[:, None]
+        # What a hit needs, in one row per triangle so that a batch gathers it in one go:
+        # v0 (3), edge1 (3), edge2 (3), normal (3), emission (3), material index (1).
+        self.hit_table = np.concatenate(
+            [self.v0, self.edge1, self.edge2, self.normal, self.emission, self.material[:, None]], axis=1
+        )
         lo = self.vertices.min(axis=0) if len(self.vertices) else np.zeros(3)
         hi = self.vertices.max(axis=0) if len(self.vertices) else np.zeros(3)
         extent = max(float(np.max(np.abs(np.concatenate([lo, hi, self.camera.origin])))),

@@ -17,22 +17,6 @@ INV_PI = 1.0 / np.pi
 INV_2PI = 0.5 / np.pi
 
 
-def _unit_disk_concentric(u: np.ndarray) -> np.ndarray:
-    """Shirley-Chiu concentric map of ``u (n, 2)`` to the unit disk, ``(n, 2)``.
-
-    Area preserving and low distortion, so stratified ``u`` stays stratified on the disk.
-    """
-    a = 2.0 * u[:, 0] - 1.0
-    b = 2.0 * u[:, 1] - 1.0
-    wide = np.abs(a) > np.abs(b)
-    # Both branches on all lanes; the zero guard keeps 0/0 out of the unused branch.
-    r = np.where(wide, a, b)
-    safe_a = np.where(a == 0.0, 1.0, a)
-    safe_b = np.where(b == 0.0, 1.0, b)
-    phi = np.where(wide, (np.pi / 4.0) * (b / safe_a), (np.pi / 2.0) - (np.pi / 4.0) * (a / safe_b))
-    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
-
-
 def sample_uniform_hemisphere(u: np.ndarray) -> np.ndarray:
     """Uniform directions on the hemisphere z >= 0. ``u (n, 2)`` -> ``(n, 3)``."""
     z = u[:, 0]
@@ -47,10 +31,15 @@ def pdf_uniform_hemisphere(w: np.ndarray) -> np.ndarray:
 
 
 def sample_cosine_hemisphere(u: np.ndarray) -> np.ndarray:
-    """Cosine-weighted directions on z >= 0 (Malley's method). ``(n, 2)`` -> ``(n, 3)``."""
-    d = _unit_disk_concentric(u)
-    z = np.sqrt(np.maximum(0.0, 1.0 - d[:, 0] ** 2 - d[:, 1] ** 2))
-    return np.stack([d[:, 0], d[:, 1], z], axis=1)
+    """Cosine-weighted directions on z >= 0 (Malley's method: a uniform point on the unit disk,
+    by the polar map r = sqrt(u0), lifted to the hemisphere). ``(n, 2)`` -> ``(n, 3)``."""
+    r = np.sqrt(u[:, 0])
+    phi = 2.0 * np.pi * u[:, 1]
+    out = np.empty((len(u), 3))
+    out[:, 0] = r * np.cos(phi)
+    out[:, 1] = r * np.sin(phi)
+    out[:, 2] = np.sqrt(np.maximum(0.0, 1.0 - u[:, 0]))
+    return out
 
 
 def pdf_cosine_hemisphere(w: np.ndarray) -> np.ndarray:
