@@ -52,8 +52,13 @@ class Bsdf:
         """The materials of lanes ``idx`` (or rows of a material table)."""
         return Bsdf(self.kind[idx], self.reflectance[idx], self.alpha[idx])
 
-    def _lanes(self, kind: int) -> np.ndarray:
-        return np.flatnonzero(self.kind == kind)
+    def _lanes(self, kind: int) -> np.ndarray | slice | None:
+        """The lanes of one kind: ``slice(None)`` when every lane is of it (no gather or scatter
+        copies), None when none is, else their indices."""
+        mask = self.kind == kind
+        if mask.all():
+            return slice(None)
+        return np.flatnonzero(mask) if mask.any() else None
 
     @property
     def delta(self) -> np.ndarray:
@@ -63,13 +68,11 @@ class Bsdf:
     def eval(self, wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
         """f(wo, wi) without the cosine, ``(n, 3)``; zero below the surface and for delta."""
         f = np.zeros((len(self.kind), 3))
-        upper = wi[:, 2] > 0.0
         d = self._lanes(DIFFUSE)
-        d = d[upper[d]]
-        f[d] = self.reflectance[d] * warp.INV_PI
+        if d is not None:
+            f[d] = self.reflectance[d] * (warp.INV_PI * (wi[d, 2] > 0.0))[:, None]
         r = self._lanes(ROUGH_CONDUCTOR)
-        r = r[upper[r]]
-        if len(r):
+        if r is not None:  # _ggx_value is 0 below the surface
             f[r] = self.reflectance[r] * _ggx_value(wo[r], wi[r], self.alpha[r])[:, None]
         return f
 
@@ -77,9 +80,10 @@ class Bsdf:
         """Solid-angle pdf with which :meth:`sample` picks ``wi``, ``(n,)``; 0 for delta."""
         pdf = np.zeros(len(self.kind))
         d = self._lanes(DIFFUSE)
-        pdf[d] = warp.pdf_cosine_hemisphere(wi[d])
+        if d is not None:
+            pdf[d] = warp.pdf_cosine_hemisphere(wi[d])
         r = self._lanes(ROUGH_CONDUCTOR)
-        if len(r):
+        if r is not None:
             pdf[r] = _ggx_pdf(wo[r], wi[r], self.alpha[r])
         return pdf
 
@@ -91,13 +95,14 @@ class Bsdf:
         pdf = np.zeros(n)
 
         d = self._lanes(DIFFUSE)
-        wi[d] = warp.sample_cosine_hemisphere(u[d])
-        pdf[d] = warp.pdf_cosine_hemisphere(wi[d])
-        # f cos / pdf = (R / pi) cos / (cos / pi) = R, wherever the sample is above the surface.
-        weight[d] = np.where(pdf[d, None] > 0.0, self.reflectance[d], 0.0)
+        if d is not None:
+            wi[d] = warp.sample_cosine_hemisphere(u[d])
+            pdf[d] = warp.pdf_cosine_hemisphere(wi[d])
+            # f cos / pdf = (R / pi) cos / (cos / pi) = R, wherever the sample is above the surface.
+            weight[d] = self.reflectance[d] * (pdf[d] > 0.0)[:, None]
 
         r = self._lanes(ROUGH_CONDUCTOR)
-        if len(r):
+        if r is not None:
             wo_r, alpha = wo[r], self.alpha[r]
             h = warp.sample_ggx_visible_normal(u[r], wo_r, alpha)
             wi_r = warp.reflect(wo_r, h)
@@ -108,8 +113,9 @@ class Bsdf:
             weight[r] *= (pdf[r] > 0.0)[:, None]
 
         m = self._lanes(MIRROR)
-        wi[m] = wo[m] * np.array([-1.0, -1.0, 1.0])
-        weight[m] = self.reflectance[m]
+        if m is not None:
+            wi[m] = wo[m] * np.array([-1.0, -1.0, 1.0])
+            weight[m] = self.reflectance[m]
         return BsdfSample(wi=wi, weight=weight, pdf=pdf, delta=self.delta.copy())
 
 

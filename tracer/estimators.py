@@ -179,24 +179,29 @@ class DirectLighting:
             pick_light = rng.random(m) < c_light
             lights_idx = np.flatnonzero(pick_light)
             dirs_idx = np.flatnonzero(~pick_light)
-            self._accumulate(radiance, sp.lane[lights_idx],
+            self._accumulate(radiance, sp.lane[lights_idx], 1,
                              self._light_technique(sp.take(lights_idx), c_light, 1.0 - c_light, rng))
-            self._accumulate(radiance, sp.lane[dirs_idx],
+            self._accumulate(radiance, sp.lane[dirs_idx], 1,
                              self._direction_technique(sp.take(dirs_idx), 1.0 - c_light, c_light, rng))
             return
         if n_light:
             rep = _repeated(sp, n_light)
-            self._accumulate(radiance, rep.lane, self._light_technique(rep, n_light, n_dir, rng))
+            self._accumulate(radiance, sp.lane, n_light, self._light_technique(rep, n_light, n_dir, rng))
         if n_dir:
             rep = _repeated(sp, n_dir)
-            self._accumulate(radiance, rep.lane, self._direction_technique(rep, n_dir, n_light, rng))
+            self._accumulate(radiance, sp.lane, n_dir, self._direction_technique(rep, n_dir, n_light, rng))
 
     @staticmethod
-    def _accumulate(radiance: np.ndarray, lanes: np.ndarray, contribution: np.ndarray) -> None:
-        """radiance[lanes] += contribution, summing repeated lanes (bincount, not np.add.at)."""
-        n = len(radiance)
-        for c in range(3):
-            radiance[:, c] += np.bincount(lanes, weights=contribution[:, c], minlength=n)
+    def _accumulate(radiance: np.ndarray, lanes: np.ndarray, count: int, contribution: np.ndarray) -> None:
+        """radiance[lanes] += the sum of each lane's ``count`` consecutive contribution rows.
+
+        ``lanes`` are distinct (one per shading point), so a fancy-indexed add is exact;
+        repeated samples of a point are consecutive rows (see ``_repeated``) and are summed
+        with a reshape, never with the slow ``np.add.at``.
+        """
+        if count > 1:
+            contribution = contribution.reshape(len(lanes), count, 3).sum(axis=1)
+        radiance[lanes] += contribution
 
     def _light_technique(self, sp: Shading, own: float, other: float,
                          rng: np.random.Generator) -> np.ndarray:
