@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from . import metrics
+from .atomic import write_text
 from .errors import InputError
 from .estimators import Strategy
 from .film import Film, exr_is_half
@@ -169,10 +170,7 @@ def save_baseline(path: str | os.PathLike[str], entries: list[Entry]) -> None:
         "per-seed values; regenerate with `tracer check --update`.",
         "entries": [e.to_json() for e in entries],
     }
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(doc, indent=2) + "\n")
-    os.replace(tmp, path)
+    write_text(path, json.dumps(doc, indent=2) + "\n")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -13,13 +13,13 @@ channel ``samples`` holds each pixel's count and ``tracer:spp`` is the smallest 
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .atomic import atomic_write
 from .errors import InputError
 
 CHANNELS = ("R", "G", "B", "variance.R", "variance.G", "variance.B")
@@ -117,7 +117,7 @@ class Film:
         for key, value in self.attributes.items():
             if key != "tracer:spp":
                 spec.attribute(key, value)
-        _atomic_write(path, lambda tmp: _oiio_write(tmp, spec, pixels))
+        atomic_write(path, lambda tmp: _oiio_write(tmp, spec, pixels))
 
     def write_png(self, path: str | os.PathLike[str], exposure: float = 0.0) -> None:
         """An 8-bit sRGB preview: exposure (stops), then the sRGB transfer curve."""
@@ -228,7 +228,7 @@ def write_png(path: str | os.PathLike[str], image: np.ndarray, exposure: float =
         pixels = to_srgb8(image, exposure)
     pixels = np.ascontiguousarray(pixels)
     spec = oiio.ImageSpec(image.shape[1], image.shape[0], pixels.shape[2], "uint8")
-    _atomic_write(path, lambda tmp: _oiio_write(tmp, spec, pixels))
+    atomic_write(path, lambda tmp: _oiio_write(tmp, spec, pixels))
 
 
 def _oiio_write(path: str, spec: Any, pixels: np.ndarray) -> None:
@@ -242,25 +242,3 @@ def _oiio_write(path: str, spec: Any, pixels: np.ndarray) -> None:
     out.close()
     if not ok:
         raise InputError(f"cannot write: {error}", path)
-
-
-def _atomic_write(path: str | os.PathLike[str], write) -> None:
-    """Call ``write(tmp)`` on a temporary file beside ``path`` (same extension, so the image
-    library picks the right format), then rename it over ``path``: never a torn file."""
-    target = Path(path)
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        raise InputError("output folder does not exist", str(folder))
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=folder)
-    os.close(fd)
-    try:
-        write(tmp)
-        # mkstemp makes the file private (0600); give it the permissions a plain open() would.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, target)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise

@@ -28,7 +28,6 @@ from __future__ import annotations
 import math
 import os
 import sys
-import tempfile
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +35,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from .atomic import save_figure
 from .errors import InputError
 
 SQRT3 = math.sqrt(3.0)
@@ -124,19 +124,8 @@ def _pyplot():
 
 
 def _save_figure(fig, path: Path) -> Path:
-    """Save atomically: a temporary name in the same folder, then rename (never a torn PNG)."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=100)
-        umask = os.umask(0)  # mkstemp makes the file 0600; give it what a plain open() would
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Save atomically (never a torn PNG) and return the path."""
+    save_figure(fig, path)
     return path
 
 

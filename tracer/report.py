@@ -8,14 +8,15 @@ from __future__ import annotations
 
 import csv
 import html
+import io
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from . import metrics
+from .atomic import save_figure, write_text
 from .compare import Run, fit_convergence, run_row, time_to_reach
 from .film import Film, to_srgb8, write_png
 
@@ -31,13 +32,6 @@ def _pyplot():
     import matplotlib.pyplot as plt
 
     return plt
-
-
-def _save_figure(fig, path: Path) -> None:
-    """Save atomically: a temporary name in the same folder, then rename."""
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
-    fig.savefig(tmp, dpi=100)
-    os.replace(tmp, path)
 
 
 def run_name(run: Run) -> str:
@@ -63,7 +57,7 @@ def save_map(values: np.ndarray, path: Path, title: str, label: str, cmap: str =
     ax.axis("off")
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label=label)
     fig.tight_layout()
-    _save_figure(fig, path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -201,7 +195,7 @@ def convergence_chart(sweep: list[dict[str, Any]], target: float, path: Path) ->
     ax_t.set_title(f"error against time (dashed: target relMSE {target:g})", fontsize=10)
     ax_s.set_title("error against samples (Monte Carlo: slope -1)", fontsize=10)
     fig.tight_layout()
-    _save_figure(fig, path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -216,7 +210,7 @@ def allocation_chart(rows: list[dict[str, Any]], path: Path) -> None:
     ax.set_yscale("log")
     ax.set_title("MIS sample allocation", fontsize=10)
     fig.tight_layout()
-    _save_figure(fig, path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -226,18 +220,14 @@ def allocation_chart(rows: list[dict[str, Any]], path: Path) -> None:
 
 def write_tables(out: Path, document: dict[str, Any]) -> None:
     """metrics.json (the whole document) and metrics.csv (the results table)."""
-    tmp = out / ".metrics.json.tmp"
-    tmp.write_text(json.dumps(document, indent=2, allow_nan=True) + "\n")
-    os.replace(tmp, out / "metrics.json")
+    write_text(out / "metrics.json", json.dumps(document, indent=2, allow_nan=True) + "\n")
     columns = ["strategy", "heuristic", "light_samples", "bsdf_samples", "spp", "seconds", "budget",
                "mse", "relmse", "variance", "efficiency", "flip"]
-    tmp = out / ".metrics.csv.tmp"
-    with open(tmp, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=columns, extrasaction="ignore")
-        writer.writeheader()
-        for row in document["results"]:
-            writer.writerow(row)
-    os.replace(tmp, out / "metrics.csv")
+    table = io.StringIO()
+    writer = csv.DictWriter(table, fieldnames=columns, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(document["results"])
+    write_text(out / "metrics.csv", table.getvalue())
 
 
 def write_index(out: Path, document: dict[str, Any], images: dict[str, list[str]]) -> None:
@@ -277,9 +267,7 @@ Data: <a href="metrics.json">metrics.json</a>, <a href="metrics.csv">metrics.csv
 {''.join(sections)}
 </body></html>
 """
-    tmp = out / ".index.html.tmp"
-    tmp.write_text(page)
-    os.replace(tmp, out / "index.html")
+    write_text(out / "index.html", page)
 
 
 def describe_mode(spp: int | None, budget: float | None) -> dict[str, Any]:

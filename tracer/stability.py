@@ -19,7 +19,6 @@ jitter), so the per-point variance is exactly what the theorem bounds.
 from __future__ import annotations
 
 import json
-import os
 import sys
 import tempfile
 import time
@@ -30,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from . import metrics
+from .atomic import save_figure, write_text
 from .estimators import DirectLighting, Strategy
 from .film import Film
 from .render import RenderSettings, render
@@ -407,9 +407,7 @@ def run_suite(
     }
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        tmp_json = out / ".stability.json.tmp"
-        tmp_json.write_text(json.dumps(doc, indent=2) + "\n")
-        os.replace(tmp_json, out / "stability.json")
+        write_text(out / "stability.json", json.dumps(doc, indent=2) + "\n")
         heat_map(cells, out / "stability.png")
     return doc
 
@@ -502,7 +500,5 @@ def heat_map(cells: list[Cell], path: Path) -> None:
     ax.set_title("relMSE per strategy and case (z: bias of the image mean, in standard errors)", fontsize=10)
     fig.colorbar(im, ax=ax, label="log10 relMSE", fraction=0.04)
     fig.tight_layout()
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
-    fig.savefig(tmp, dpi=100)
-    os.replace(tmp, path)
+    save_figure(fig, path)
     plt.close(fig)
