@@ -253,7 +253,7 @@ def image_variance(m: Measurement) -> np.ndarray:
     estimate its own variance (often 0), and the reference's (MIS, thousands of samples per
     pixel) is a floor of the right size there; Mitsuba 3's render tests use it alone."""
     per_sample = np.maximum(m.pooled.variance(), m.reference_sample_var)
-    return per_sample / np.maximum(m.pooled.count, 1)[:, None]
+    return per_sample / np.maximum(m.pooled.count, 1)[:, None]  # as Film.variance_of_mean, floored
 
 
 def pixel_pvalues(m: Measurement) -> np.ndarray:
@@ -279,25 +279,16 @@ def image_mean_pvalue(m: Measurement) -> tuple[float, float]:
     would understate the standard error by up to sqrt(3)."""
     from scipy import stats
 
-    p = len(m.pooled.count)
-    var_image = image_variance(m).sum(axis=0) / p**2
-    var_ref = m.reference_var.sum(axis=0) / p**2
-    diff = m.pooled.mean.mean(axis=0) - m.reference_mean.mean(axis=0)
-    sd = np.sqrt(var_image + var_ref)
-    z = np.where(sd > 0, diff / np.where(sd > 0, sd, 1.0), np.where(diff == 0, 0.0, np.inf))
+    z = metrics.image_mean_z(m.pooled.mean, image_variance(m), m.reference_mean, m.reference_var)
     worst = int(np.argmax(np.abs(z)))
     p_worst = 2.0 * stats.norm.sf(abs(z[worst]))
     return float(z[worst]), float(1.0 - (1.0 - p_worst) ** 3)
 
 
-def sidak(alpha: float, m: int) -> float:
-    return 1.0 - (1.0 - alpha) ** (1.0 / max(m, 1))
-
-
 def judge(entries: list[Entry], measurements: dict[str, Measurement]) -> list[Verdict]:
     """The verdicts of every entry, with the Sidak levels of the whole file."""
-    noise_level = sidak(FAMILY_ALPHA, 2 * len(entries))
-    mean_level = sidak(FAMILY_ALPHA, len(entries))
+    noise_level = metrics.sidak(FAMILY_ALPHA, 2 * len(entries))
+    mean_level = metrics.sidak(FAMILY_ALPHA, len(entries))
     verdicts = []
     for e in entries:
         m = measurements[e.name]
@@ -311,7 +302,7 @@ def judge(entries: list[Entry], measurements: dict[str, Measurement]) -> list[Ve
             verdicts.append(Verdict(e.name, measure_name, float(np.mean(values)), base, p, p >= noise_level))
         if e.pixel_test:
             pvalues = pixel_pvalues(m)
-            share = float(np.mean(pvalues > sidak(FAMILY_ALPHA, pvalues.size)))
+            share = float(np.mean(pvalues > metrics.sidak(FAMILY_ALPHA, pvalues.size)))
             verdicts.append(
                 Verdict(e.name, "pixels passing", share, PIXEL_PASS_SHARE, share, share >= PIXEL_PASS_SHARE)
             )

@@ -84,6 +84,10 @@ class Film:
         denom = np.maximum(self.count - 1, 1).astype(np.float64)[:, None]
         return np.where((self.count >= 2)[:, None], self.m2 / denom, 0.0)
 
+    def variance_of_mean(self) -> np.ndarray:
+        """(P, 3) variance of each pixel value (the mean): per-sample variance / count."""
+        return self.variance() / np.maximum(self.count, 1)[:, None]
+
     def image(self) -> np.ndarray:
         """(H, W, 3) float64 pixel means."""
         return self.mean.reshape(self.height, self.width, 3)

@@ -33,8 +33,28 @@ def relmse(image: np.ndarray, reference: np.ndarray) -> float:
 
 def variance(film: Film) -> float:
     """Mean over pixels and channels of the variance of the pixel value."""
-    counts = np.maximum(film.count, 1)[:, None]
-    return float(np.mean(film.variance() / counts))
+    return float(np.mean(film.variance_of_mean()))
+
+
+def sidak(alpha: float, m: int) -> float:
+    """Per-test level for m tests with a family-wise false-alarm rate alpha (Sidak)."""
+    return 1.0 - (1.0 - alpha) ** (1.0 / max(m, 1))
+
+
+def image_mean_z(
+    mean: np.ndarray, var_of_mean: np.ndarray, ref_mean: np.ndarray, ref_var_of_mean: np.ndarray
+) -> np.ndarray:
+    """Per-channel z-scores ``(3,)`` of an image mean against a reference's.
+
+    Inputs are ``(P, 3)`` pixel means and variances of the pixel means. Pixels are independent,
+    so Var(image mean) = sum of pixel variances / P^2; channels are kept apart because one
+    sample's R, G and B errors are almost perfectly correlated. Where both variances vanish,
+    z is 0 for equal means and infinite otherwise.
+    """
+    p = len(mean)
+    diff = mean.mean(axis=0) - ref_mean.mean(axis=0)
+    sd = np.sqrt((var_of_mean.sum(axis=0) + ref_var_of_mean.sum(axis=0)) / p**2)
+    return np.where(sd > 0, diff / np.where(sd > 0, sd, 1.0), np.where(np.abs(diff) < 1e-12, 0.0, np.inf))
 
 
 def efficiency(relmse_value: float, seconds: float) -> float:
@@ -68,8 +88,9 @@ def box_blur(image: np.ndarray, radius: int) -> np.ndarray:
     return out
 
 
-def efficiency_ratio_map(error_a: np.ndarray, seconds_a: float, error_b: np.ndarray, seconds_b: float,
-                         radius: int = 3) -> np.ndarray:
+def efficiency_ratio_map(
+    error_a: np.ndarray, seconds_a: float, error_b: np.ndarray, seconds_b: float, radius: int = 3
+) -> np.ndarray:
     """Per-pixel log2 of efficiency(a) / efficiency(b), ``(H, W)``.
 
     ``error_*`` are ``(H, W, 3)`` squared errors against the reference; they are averaged over

@@ -293,13 +293,8 @@ class Cell:
 
 
 def _image_mean_z(film: Film, reference: Film) -> float:
-    """Worst-channel z of the image mean against the reference's (pixels independent)."""
-    p = len(film.count)
-    var = (film.variance() / np.maximum(film.count, 1)[:, None]).sum(axis=0) / p**2
-    var += (reference.variance() / np.maximum(reference.count, 1)[:, None]).sum(axis=0) / p**2
-    diff = film.mean.mean(axis=0) - reference.mean.mean(axis=0)
-    sd = np.sqrt(var)
-    z = np.where(sd > 0, diff / np.where(sd > 0, sd, 1.0), np.where(np.abs(diff) < 1e-12, 0.0, np.inf))
+    """Worst-channel z of the image mean against the reference's."""
+    z = metrics.image_mean_z(film.mean, film.variance_of_mean(), reference.mean, reference.variance_of_mean())
     return float(z[np.argmax(np.abs(z))])
 
 
@@ -432,12 +427,12 @@ def expectations(doc: dict[str, Any], alpha: float = 0.01) -> list[str]:
         if c.blind and not c.zero:
             problems.append(f"{c.case}/{c.strategy}: blind to the light but not zero")
     testable = [c for c in cells if c.testable]
-    z_crit = stats.norm.isf((1.0 - (1.0 - alpha) ** (1.0 / max(len(testable), 1))) / 2.0)
+    z_crit = stats.norm.isf(metrics.sidak(alpha, len(testable)) / 2.0)
     for c in testable:
         if not abs(c.z) <= z_crit:
             problems.append(f"{c.case}/{c.strategy}: biased, image mean z = {c.z:+.2f} (bound {z_crit:.2f})")
     bounds = doc.get("veach_bound", {})
-    z_veach = stats.norm.isf(1.0 - (1.0 - alpha) ** (1.0 / max(len(bounds), 1)))
+    z_veach = stats.norm.isf(metrics.sidak(alpha, len(bounds)))
     for name, b in bounds.items():
         best = b["technique"]
         excess = b["mis_balance"] - (b[best] + b["slack"])
