@@ -13,10 +13,9 @@ import json
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from tracer import lights, mis
+from tracer import estimators
 from tracer.check import format_table, load_baseline, run_check, save_baseline
 from tracer.cli import main
 
@@ -62,11 +61,23 @@ def test_halved_baseline_noise_fails_with_table_and_maps(baseline_copy, tmp_path
         assert (out / "cornell_light" / file).is_file(), file
 
 
+def _patch_estimator(monkeypatch, change):
+    """Every DirectLighting built from now on gets ``change(estimator)`` applied after its
+    constructor: the faults below are injected into the tables the compiled kernels read."""
+    original = estimators.DirectLighting.__init__
+
+    def patched(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        change(self)
+
+    monkeypatch.setattr(estimators.DirectLighting, "__init__", patched)
+
+
 def test_noisier_estimator_fails(baseline_copy, monkeypatch):
-    """Constant MIS weights (1/2, 1/2) stay unbiased but are far noisier on Veach's plates:
-    the noise test catches it and the image mean stays unbiased. (The per-pixel z-test may
-    flag it too: the estimator becomes so heavy-tailed that its normal approximation fails.)"""
-    monkeypatch.setattr(mis, "weight", lambda heuristic, mine, other: np.where(other > 0, 0.5, 1.0))
+    """MIS switched by mistake to its one-sample form (one technique per sample, chosen with
+    probability 1/2) stays unbiased but takes half the samples: the noise test catches it and
+    the image mean stays unbiased."""
+    _patch_estimator(monkeypatch, lambda est: setattr(est, "plan", est.plan._replace(one_sample=True)))
     result = run_check(baseline_copy, stream=None, entries=_only(baseline_copy, "veach_mis/mis-power"))
     failed = {v.measure for v in result.verdicts if not v.ok}
     assert "relmse" in failed, format_table(result.verdicts)
@@ -75,15 +86,14 @@ def test_noisier_estimator_fails(baseline_copy, monkeypatch):
 
 def test_biased_estimator_fails(baseline_copy, monkeypatch):
     """A light pdf 10% too large (an image 10% too dark) fails the per-pixel and image-mean
-    bias tests."""
-    original = lights.LightSampler.sample
+    bias tests. The fault: the selection pmf / area column of the area-light table."""
 
-    def biased(self, u_select, u_point, x):
-        sample = original(self, u_select, u_point, x)
-        sample.pdf *= 1.1
-        return sample
+    def biased(est):
+        area = est.lights.tables.area.copy()
+        area[:, 15] *= 1.1
+        est.lights.tables = est.lights.tables._replace(area=area)
 
-    monkeypatch.setattr(lights.LightSampler, "sample", biased)
+    _patch_estimator(monkeypatch, biased)
     result = run_check(baseline_copy, stream=None, entries=_only(baseline_copy, "cornell/light"))
     failed = {v.measure for v in result.verdicts if not v.ok}
     assert {"pixels passing", "image mean z"} <= failed, format_table(result.verdicts)

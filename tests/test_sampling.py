@@ -328,8 +328,7 @@ def test_ggx_d_is_normalized(alpha):
     adaptive quadrature in theta, with the peak at theta ~ alpha as a break point); quad's
     own error estimate is < 1e-11, so 1e-9 is tight yet safe."""
     def integrand(theta):
-        h = np.array([[np.sin(theta), 0.0, np.cos(theta)]])
-        return 2.0 * np.pi * warp.ggx_d(h, np.array([alpha]))[0] * np.cos(theta) * np.sin(theta)
+        return 2.0 * np.pi * warp.ggx_d(np.cos(theta), alpha) * np.cos(theta) * np.sin(theta)
 
     value, err = integrate.quad(integrand, 0.0, np.pi / 2, points=[np.arctan(alpha)], limit=200,
                                 epsabs=1e-13, epsrel=1e-12)
@@ -376,7 +375,7 @@ def test_ggx_pdf_mass_and_energy(alpha, wo_name):
         return b.eval(tile(wo, len(wi)), wi)[:, 0] * wi[:, 2]
 
     def pdf_g1(wi):
-        return pdf(wi) * warp.ggx_g1(wi, np.full(len(wi), alpha))
+        return pdf(wi) * warp.ggx_g1_array(wi, np.full(len(wi), alpha))
 
     wi = unit(rng(14).normal(size=(100000, 3)))
     np.testing.assert_allclose(pdf(wi), np.where(wi[:, 2] > 0.0, q(wi), 0.0), rtol=RTOL, atol=0)

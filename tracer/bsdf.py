@@ -1,14 +1,18 @@
-"""BSDFs on batches: Lambertian diffuse, GGX rough conductor, ideal mirror.
+"""BSDFs: Lambertian diffuse, GGX rough conductor, ideal mirror.
 
 All directions are in the local shading frame (z = normal flipped toward the viewer, so
 ``wo.z > 0``: materials are two-sided). ``wo`` points toward the viewer, ``wi`` toward the
-light (pbrt's convention). ``eval`` returns f without the cosine; the estimator multiplies
-|cos theta_i| where the rendering equation has it. Each lane carries its own material
-parameters, so one batch may mix materials; work is split by kind with index arrays.
+light (pbrt's convention). Every material's f is its RGB reflectance times a scalar
+*shape* that depends on the directions alone, so the per-lane functions work with the shape
+and the caller multiplies the reflectance in. ``shape`` is f without the cosine; the
+estimator multiplies |cos theta_i| where the rendering equation has it.
 
 Measures: ``pdf`` is with respect to solid angle of ``wi``. A delta BSDF (the mirror) has
-``eval = 0`` and ``pdf = 0`` for every direction (no other technique can hit its lobe) and
-reports its samples with ``delta = True``.
+shape 0 and pdf 0 for every direction (no other technique can hit its lobe) and reports its
+samples with ``delta = True``.
+
+The per-lane functions are compiled (``tracer.jit``) for the estimator's kernels; the
+``Bsdf`` class runs the same code over batches with per-lane materials (tests, tools).
 """
 
 from __future__ import annotations
@@ -18,10 +22,90 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import warp
+from .jit import jit
 
 # Material kinds; ``NONE`` is the black material of shapes that name none.
 NONE, DIFFUSE, ROUGH_CONDUCTOR, MIRROR = 0, 1, 2, 3
 KIND_NAMES = {"diffuse": DIFFUSE, "roughconductor": ROUGH_CONDUCTOR, "mirror": MIRROR}
+
+
+# ---------------------------------------------------------------------------------------------
+# Per-lane functions
+
+
+@jit
+def _cos2_half(wo, wi) -> float:
+    """cos^2 of the half vector h = normalize(wo + wi), without the square root."""
+    hx, hy, hz = wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]
+    return hz * hz / (hx * hx + hy * hy + hz * hz)
+
+
+@jit
+def ggx_value(wo, wi, alpha: float) -> float:
+    """D(h) G1(wo) G1(wi) / (4 cos_o cos_i): the GGX microfacet BRDF with Fresnel = 1.
+    With G1 = 2 cos / (cos + sigma) (``warp.ggx_sigma``) the cosines cancel:
+    f = D(h) / ((cos_o + sigma_o) (cos_i + sigma_i))."""
+    cos_o, cos_i = wo[2], wi[2]
+    if cos_o <= 0.0 or cos_i <= 0.0:
+        return 0.0
+    return warp.ggx_d_cos2(_cos2_half(wo, wi), alpha) / (
+        (cos_o + warp.ggx_sigma(cos_o, alpha)) * (cos_i + warp.ggx_sigma(cos_i, alpha)))
+
+
+@jit
+def ggx_pdf(wo, wi, alpha: float) -> float:
+    """pdf of wi = reflect(wo, h) with h ~ visible normals: D_wo(h) / (4 wo.h) =
+    G1(wo) D(h) / (4 cos_o) = D(h) / (2 (cos_o + sigma_o)), where wi.z > 0 and wo.h > 0
+    (wo.h > 0 is 1 + wo.wi > 0 for unit vectors)."""
+    cos_o = wo[2]
+    if wi[2] <= 0.0 or cos_o <= 0.0 or 1.0 + (wo[0] * wi[0] + wo[1] * wi[1] + wo[2] * wi[2]) <= 0.0:
+        return 0.0
+    return warp.ggx_d_cos2(_cos2_half(wo, wi), alpha) / (2.0 * (cos_o + warp.ggx_sigma(cos_o, alpha)))
+
+
+@jit
+def shape(kind: int, alpha: float, wo, wi) -> float:
+    """f(wo, wi) / reflectance, without the cosine; 0 below the surface and for delta."""
+    if kind == DIFFUSE:
+        return warp.INV_PI if wi[2] > 0.0 else 0.0
+    if kind == ROUGH_CONDUCTOR:
+        return ggx_value(wo, wi, alpha)
+    return 0.0
+
+
+@jit
+def pdf(kind: int, alpha: float, wo, wi) -> float:
+    """Solid-angle pdf with which :func:`sample` picks ``wi``; 0 for delta."""
+    if kind == DIFFUSE:
+        return warp.cosine_hemisphere_pdf(wi[2])
+    if kind == ROUGH_CONDUCTOR:
+        return ggx_pdf(wo, wi, alpha)
+    return 0.0
+
+
+@jit
+def sample(kind: int, alpha: float, wo, u0: float, u1: float):
+    """Importance-sample ``wi`` given ``wo``. Returns ``(wi, weight, pdf, delta)``: weight is
+    shape |cos theta_i| / pdf (1 for a delta sample; 0 if the sample is invalid)."""
+    if kind == DIFFUSE:
+        wi = warp.cosine_hemisphere(u0, u1)
+        p = warp.cosine_hemisphere_pdf(wi[2])
+        # shape cos / pdf = (1 / pi) cos / (cos / pi) = 1 wherever the sample is above the surface.
+        return wi, (1.0 if p > 0.0 else 0.0), p, False
+    if kind == ROUGH_CONDUCTOR:
+        h = warp.ggx_visible_normal(wo, alpha, u0, u1)
+        d = 2.0 * (wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2])
+        wi = (d * h[0] - wo[0], d * h[1] - wo[1], d * h[2] - wo[2])
+        p = ggx_pdf(wo, wi, alpha)
+        # With separable Smith G and VNDF sampling, shape cos / pdf reduces to G1(wi).
+        return wi, (warp.ggx_g1(wi[2], alpha) if p > 0.0 else 0.0), p, False
+    if kind == MIRROR:
+        return (-wo[0], -wo[1], wo[2]), 1.0, 0.0, True
+    return (0.0, 0.0, 1.0), 0.0, 0.0, False
+
+
+# ---------------------------------------------------------------------------------------------
+# Batches
 
 
 @dataclass
@@ -42,7 +126,8 @@ class BsdfSample:
 
 @dataclass
 class Bsdf:
-    """Per-lane material parameters. kind (n,) int8, reflectance (n, 3), alpha (n,) float64."""
+    """Per-lane material parameters (or a scene's material table, one row per material).
+    kind (n,) int8, reflectance (n, 3), alpha (n,) float64."""
 
     kind: np.ndarray
     reflectance: np.ndarray
@@ -52,14 +137,6 @@ class Bsdf:
         """The materials of lanes ``idx`` (or rows of a material table)."""
         return Bsdf(self.kind[idx], self.reflectance[idx], self.alpha[idx])
 
-    def _lanes(self, kind: int) -> np.ndarray | slice | None:
-        """The lanes of one kind: ``slice(None)`` when every lane is of it (no gather or scatter
-        copies), None when none is, else their indices."""
-        mask = self.kind == kind
-        if mask.all():
-            return slice(None)
-        return np.flatnonzero(mask) if mask.any() else None
-
     @property
     def delta(self) -> np.ndarray:
         """(n,) bool: the lane's BSDF is a delta distribution."""
@@ -67,73 +144,33 @@ class Bsdf:
 
     def eval(self, wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
         """f(wo, wi) without the cosine, ``(n, 3)``; zero below the surface and for delta."""
-        f = np.zeros((len(self.kind), 3))
-        d = self._lanes(DIFFUSE)
-        if d is not None:
-            f[d] = self.reflectance[d] * (warp.INV_PI * (wi[d, 2] > 0.0))[:, None]
-        r = self._lanes(ROUGH_CONDUCTOR)
-        if r is not None:  # _ggx_value is 0 below the surface
-            f[r] = self.reflectance[r] * _ggx_value(wo[r], wi[r], self.alpha[r])[:, None]
-        return f
+        return self.reflectance * _shape_or_pdf(0, self.kind, self.alpha, wo, wi)[:, None]
 
     def pdf(self, wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
         """Solid-angle pdf with which :meth:`sample` picks ``wi``, ``(n,)``; 0 for delta."""
-        pdf = np.zeros(len(self.kind))
-        d = self._lanes(DIFFUSE)
-        if d is not None:
-            pdf[d] = warp.pdf_cosine_hemisphere(wi[d])
-        r = self._lanes(ROUGH_CONDUCTOR)
-        if r is not None:
-            pdf[r] = _ggx_pdf(wo[r], wi[r], self.alpha[r])
-        return pdf
+        return _shape_or_pdf(1, self.kind, self.alpha, wo, wi)
 
     def sample(self, u: np.ndarray, wo: np.ndarray) -> BsdfSample:
-        """Importance-sample ``wi`` given ``wo``, with ``u (n, 2)`` in [0, 1)^2."""
-        n = len(self.kind)
-        wi = np.zeros((n, 3))
-        weight = np.zeros((n, 3))
-        pdf = np.zeros(n)
-
-        d = self._lanes(DIFFUSE)
-        if d is not None:
-            wi[d] = warp.sample_cosine_hemisphere(u[d])
-            pdf[d] = warp.pdf_cosine_hemisphere(wi[d])
-            # f cos / pdf = (R / pi) cos / (cos / pi) = R, wherever the sample is above the surface.
-            weight[d] = self.reflectance[d] * (pdf[d] > 0.0)[:, None]
-
-        r = self._lanes(ROUGH_CONDUCTOR)
-        if r is not None:
-            wo_r, alpha = wo[r], self.alpha[r]
-            h = warp.sample_ggx_visible_normal(u[r], wo_r, alpha)
-            wi_r = warp.reflect(wo_r, h)
-            wi[r] = wi_r
-            pdf[r] = _ggx_pdf(wo_r, wi_r, alpha)
-            # With separable Smith G and VNDF sampling, f cos / pdf reduces to R G1(wi).
-            weight[r] = self.reflectance[r] * warp.ggx_g1(wi_r, alpha)[:, None]
-            weight[r] *= (pdf[r] > 0.0)[:, None]
-
-        m = self._lanes(MIRROR)
-        if m is not None:
-            wi[m] = wo[m] * np.array([-1.0, -1.0, 1.0])
-            weight[m] = self.reflectance[m]
-        return BsdfSample(wi=wi, weight=weight, pdf=pdf, delta=self.delta.copy())
+        """Importance-sample ``wi`` given ``wo (n, 3)``, with ``u (n, 2)`` in [0, 1)^2."""
+        wi, weight, p, delta = _sample_lanes(self.kind, self.alpha, wo, u)
+        return BsdfSample(wi, self.reflectance * weight[:, None], p, delta)
 
 
-def _ggx_value(wo: np.ndarray, wi: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """D(h) G1(wo) G1(wi) / (4 cos_o cos_i): the GGX microfacet BRDF with Fresnel = 1."""
-    h = wo + wi
-    h /= np.linalg.norm(h, axis=1, keepdims=True)
-    cos_o, cos_i = wo[:, 2], wi[:, 2]
-    value = warp.ggx_d(h, alpha) * warp.ggx_g1(wo, alpha) * warp.ggx_g1(wi, alpha)
-    return np.where((cos_o > 0.0) & (cos_i > 0.0), value / (4.0 * cos_o * np.maximum(cos_i, 1e-300)), 0.0)
+@jit
+def _shape_or_pdf(which: int, kind, alpha, wo, wi) -> np.ndarray:
+    out = np.empty(len(kind))
+    for i in range(len(kind)):
+        o, w = (wo[i, 0], wo[i, 1], wo[i, 2]), (wi[i, 0], wi[i, 1], wi[i, 2])
+        out[i] = shape(kind[i], alpha[i], o, w) if which == 0 else pdf(kind[i], alpha[i], o, w)
+    return out
 
 
-def _ggx_pdf(wo: np.ndarray, wi: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """pdf of wi = reflect(wo, h) with h ~ visible normals: D_wo(h) / (4 wo.h)."""
-    h = wo + wi
-    norm = np.linalg.norm(h, axis=1, keepdims=True)
-    h /= np.where(norm > 0.0, norm, 1.0)
-    wo_dot_h = np.sum(wo * h, axis=1)
-    valid = (wi[:, 2] > 0.0) & (wo_dot_h > 0.0)
-    pdf_h = warp.pdf_ggx_visible_normal(h, wo, alpha)
-    return np.where(valid, pdf_h / (4.0 * np.where(valid, wo_dot_h, 1.0)), 0.0)
+@jit
+def _sample_lanes(kind, alpha, wo, u):
+    n = len(kind)
+    wi, weight, p, delta = np.empty((n, 3)), np.empty(n), np.empty(n), np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        w, weight[i], p[i], delta[i] = sample(kind[i], alpha[i], (wo[i, 0], wo[i, 1], wo[i, 2]),
+                                             u[i, 0], u[i, 1])
+        wi[i, 0], wi[i, 1], wi[i, 2] = w
+    return wi, weight, p, delta

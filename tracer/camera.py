@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .jit import jit
+
 
 @dataclass
 class Camera:
@@ -35,11 +37,21 @@ class Camera:
         Returns origins (n, 3) and unit directions (n, 3), float64.
         """
         f, r, u = self.basis
-        px = (pixel % self.width) + jitter[:, 0]
-        py = (pixel // self.width) + jitter[:, 1]
-        tan_half = np.tan(np.radians(self.fov) * 0.5)
-        sx = (2.0 * px / self.width - 1.0) * tan_half * (self.width / self.height)
-        sy = (1.0 - 2.0 * py / self.height) * tan_half
-        d = f + sx[:, None] * r + sy[:, None] * u
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        tan_half = float(np.tan(np.radians(self.fov) * 0.5))
+        d = _directions(np.asarray(pixel), np.asarray(jitter, dtype=np.float64), self.width, self.height,
+                        tan_half, f, r, u)
         return np.broadcast_to(self.origin, d.shape), d
+
+
+@jit
+def _directions(pixel, jitter, width, height, tan_half, f, r, u) -> np.ndarray:
+    """Unit directions through film positions; screen x spans [-aspect, aspect] tan_half."""
+    d = np.empty((len(pixel), 3))
+    aspect = width / height
+    for i in range(len(pixel)):
+        sx = (2.0 * ((pixel[i] % width) + jitter[i, 0]) / width - 1.0) * tan_half * aspect
+        sy = (1.0 - 2.0 * ((pixel[i] // width) + jitter[i, 1]) / height) * tan_half
+        x, y, z = f[0] + sx * r[0] + sy * u[0], f[1] + sx * r[1] + sy * u[1], f[2] + sx * r[2] + sy * u[2]
+        inv = 1.0 / np.sqrt(x * x + y * y + z * z)
+        d[i, 0], d[i, 1], d[i, 2] = x * inv, y * inv, z * inv
+    return d

@@ -18,9 +18,11 @@ from embreex.mesh_construction import TriangleMesh
 class Hits:
     """Closest hits of a batch of rays.
 
-    prim : (n,) int64 triangle index, -1 on a miss.
-    t : (n,) float64 distance along the (unit) ray direction; inf on a miss.
-    u, v : (n,) float64 barycentrics of the hit: p = v0 + u (v1 - v0) + v (v2 - v0).
+    prim : (n,) int32 triangle index, -1 on a miss.
+    t : (n,) float32 distance along the (unit) ray direction; inf on a miss.
+    u, v : (n,) float32 barycentrics of the hit: p = v0 + u (v1 - v0) + v (v2 - v0).
+
+    Embree's own arrays, not converted: the kernels read them as they are.
     """
 
     prim: np.ndarray
@@ -50,13 +52,13 @@ class RayCaster:
         """Closest hit along each ray. ``origins, dirs: (n, 3)``, dirs unit length."""
         n = len(origins)
         if self.empty or n == 0:
-            return Hits(np.full(n, -1, dtype=np.int64), np.full(n, np.inf), np.zeros(n), np.zeros(n))
+            zero = np.zeros(n, dtype=np.float32)
+            return Hits(np.full(n, -1, dtype=np.int32), np.full(n, np.inf, dtype=np.float32), zero, zero)
         out = self._scene.run(_f32(origins), _f32(dirs), output=1)
-        prim = out["primID"].astype(np.int64)
-        miss = prim < 0
-        t = out["tfar"].astype(np.float64)
-        t[miss] = np.inf
-        return Hits(prim, t, out["u"].astype(np.float64), out["v"].astype(np.float64))
+        prim = out["primID"]
+        t = out["tfar"]
+        t[prim < 0] = np.inf
+        return Hits(prim, t, out["u"], out["v"])
 
     def occluded(self, origins: np.ndarray, dirs: np.ndarray, tmax: np.ndarray) -> np.ndarray:
         """(n,) bool: something lies on the segment origin + t dir, 0 <= t < tmax."""

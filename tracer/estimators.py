@@ -29,22 +29,35 @@ c p. With a single technique the other count is 0 and the weight is 1.
 Delta rule: a point light's sample and a mirror's sample get weight 1, because the other
 technique produces them with probability 0. Whatever a technique cannot see (a point light
 from BSDF or hemisphere sampling, a mirror's reflection from light sampling) contributes 0.
+
+A batch runs as a wavefront of three ray casts and two compiled loops over its lanes
+(``tracer.jit``): Embree finds the camera hits; ``_shade`` samples the light and direction
+techniques at every shading point and writes one shadow ray per light sample and one ray per
+direction sample, with what each would contribute; Embree casts both sets; ``_gather`` adds
+the unblocked light samples and the direction samples that hit an emitter, with their MIS
+weights. Random numbers are ``rand.uniform(key, lane, dimension)``: dimension 0 chooses the
+technique in one-sample MIS, light sample j uses 1 + 3j .. 3 + 3j, direction sample j uses
+the two after all light samples.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from . import mis, warp
-from .bsdf import NONE, Bsdf
+from . import bsdf, lights, mis, rand, warp
 from .embree import RayCaster
-from .frame import Frame
-from .lights import LightSampler
+from .frame import add_scaled, basis, normalized, scale, sub, to_local, to_world
+from .jit import jit
+from .lights import LightSampler, LightTables
 from .scene import STRATEGIES, Scene
 
 DIRECTION_SAMPLER = {"uniform": "uniform", "cosine": "cosine", "bsdf": "bsdf", "mis": "bsdf"}
+# Codes of the direction samplers for compiled code.
+NO_SAMPLER, UNIFORM, COSINE, BSDF = 0, 1, 2, 3
+SAMPLER_CODE = {None: NO_SAMPLER, "uniform": UNIFORM, "cosine": COSINE, "bsdf": BSDF}
 
 
 @dataclass(frozen=True)
@@ -65,8 +78,7 @@ class Strategy:
     def __post_init__(self) -> None:
         if self.name not in STRATEGIES:
             raise ValueError(f"unknown strategy {self.name!r}; expected one of {STRATEGIES}")
-        if self.heuristic not in mis.HEURISTICS:
-            raise ValueError(f"unknown heuristic {self.heuristic!r}; expected one of {mis.HEURISTICS}")
+        mis.code(self.heuristic)  # raises on an unknown name
         if self.light_samples < 0 or self.bsdf_samples < 0:
             raise ValueError("sample counts must be >= 0")
         if self.light_count + self.direction_count == 0:
@@ -93,32 +105,41 @@ class Strategy:
     def direction_sampler(self) -> str | None:
         return DIRECTION_SAMPLER.get(self.name)
 
+    @property
+    def one_sample_mis(self) -> bool:
+        """Each shading point takes one technique, chosen at random (both counts > 0)."""
+        return self.one_sample and self.light_count > 0 and self.direction_count > 0
 
-@dataclass
-class Shading:
-    """Shading points of the lanes that hit a surface with a material.
 
-    lane : (m,) index of the camera lane each point belongs to.
-    x : (m, 3) hit position.   origin : (m, 3) x offset along the normal toward the viewer.
-    frame : shading frames, z = face normal flipped toward the viewer.
-    wo : (m, 3) local direction toward the viewer (wo.z > 0).   bsdf : per-lane materials.
+class Surfaces(NamedTuple):
+    """The scene as the kernels read it.
+
+    hit_table : (F, 16) per triangle: v0, edge1, edge2, face normal, emission, material row.
+    kind : (K,) int8, reflectance : (K, 3), alpha : (K,): the material table.
+    eps : ray offset along the normal (``Scene.ray_epsilon``).
     """
 
-    lane: np.ndarray
-    x: np.ndarray
-    origin: np.ndarray
-    frame: Frame
-    wo: np.ndarray
-    bsdf: Bsdf
-
-    def take(self, idx: np.ndarray) -> "Shading":
-        return Shading(self.lane[idx], self.x[idx], self.origin[idx], self.frame.take(idx),
-                       self.wo[idx], self.bsdf.take(idx))
+    hit_table: np.ndarray
+    kind: np.ndarray
+    reflectance: np.ndarray
+    alpha: np.ndarray
+    eps: float
 
 
-def _repeated(sp: Shading, count: int) -> Shading:
-    """Each shading point ``count`` times in a row (one lane per sample); no copy for 1."""
-    return sp if count == 1 else sp.take(np.repeat(np.arange(len(sp.lane)), count))
+class Plan(NamedTuple):
+    """A strategy as the kernels read it.
+
+    n_light, n_dir : samples per shading point of each technique (0 if unused).
+    sampler : direction sampler code.   heuristic : MIS heuristic code.
+    one_sample : one-sample MIS.   c_light : probability of the light technique in it.
+    """
+
+    n_light: int
+    n_dir: int
+    sampler: int
+    heuristic: int
+    one_sample: bool
+    c_light: float
 
 
 class DirectLighting:
@@ -129,168 +150,212 @@ class DirectLighting:
         self.strategy = strategy
         self.caster = caster if caster is not None else RayCaster(scene.vertices, scene.faces)
         self.lights = LightSampler(scene, strategy.light_selection)
-        self.eps = scene.ray_epsilon
-
-    # -----------------------------------------------------------------------------------------
-    # Camera rays -> radiance
+        m = scene.materials
+        self.surfaces = Surfaces(np.ascontiguousarray(scene.hit_table), np.ascontiguousarray(m.kind),
+                                 np.ascontiguousarray(m.reflectance, dtype=np.float64),
+                                 np.ascontiguousarray(m.alpha, dtype=np.float64), float(scene.ray_epsilon))
+        n_light, n_dir = strategy.light_count, strategy.direction_count
+        self.plan = Plan(n_light, n_dir, SAMPLER_CODE[strategy.direction_sampler],
+                         mis.code(strategy.heuristic), strategy.one_sample_mis, n_light / (n_light + n_dir))
 
     def radiance(self, origins: np.ndarray, dirs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Radiance along camera rays ``(n, 3)``: emission seen directly plus direct lighting.
-
-        Returns ``(n, 3)`` float64, one Monte Carlo sample per ray. The caller guards against
-        non-finite values.
-        """
+        """Radiance along camera rays ``(n, 3)`` (dirs unit length): emission seen directly plus
+        direct lighting. Returns ``(n, 3)`` float64, one Monte Carlo sample per ray; the
+        caller guards against non-finite values. Draws one 64-bit key from ``rng``."""
+        key = rand.batch_key(rng)
         n = len(origins)
-        radiance = np.zeros((n, 3))
+        plan = self.plan
+        shadow = RayBuffer.empty(n if plan.one_sample else n * plan.n_light)
+        direction = RayBuffer.empty(n if plan.one_sample else n * plan.n_dir)
         hits = self.caster.intersect(origins, dirs)
-        lane = np.flatnonzero(hits.prim >= 0)
-        g = self.scene.hit_table[hits.prim[lane]]
-        wo_world = -dirs[lane]
-        cos_view = np.einsum("ij,ij->i", g[:, 9:12], wo_world)
-
-        # --- Emitters seen directly (weight 1 in every strategy): front side only.
-        radiance[lane] = g[:, 12:15] * (cos_view > 0.0)[:, None]
-
-        # --- Shading points: surfaces with a material and a defined normal.
-        keep = (g[:, 15] != NONE) & (cos_view != 0.0)
-        if not np.all(keep):
-            lane, g, wo_world, cos_view = lane[keep], g[keep], wo_world[keep], cos_view[keep]
-        if len(lane) == 0:
-            return radiance
-        x = g[:, 0:3] + hits.u[lane, None] * g[:, 3:6] + hits.v[lane, None] * g[:, 6:9]
-        normal = g[:, 9:12] * np.sign(cos_view)[:, None]
-        frame = Frame.from_normal(normal)
-        shading = Shading(lane, x, x + self.eps * normal, frame, frame.to_local(wo_world),
-                          self.scene.materials.take(g[:, 15].astype(np.intp)))
-        self._direct(shading, radiance, rng)
+        radiance = np.empty((n, 3))
+        tables = self.lights.tables
+        n_shadow, n_direction = _shade(hits.prim, hits.u, hits.v, dirs, key, self.surfaces, tables, plan,
+                                       radiance, shadow, direction)
+        s, d = slice(0, n_shadow), slice(0, n_direction)
+        blocked = self.caster.occluded(shadow.origin[s], shadow.dir[s], shadow.tmax[s])
+        found = self.caster.intersect(direction.origin[d], direction.dir[d])
+        _gather(radiance, self.surfaces, tables, plan, shadow, blocked, direction, found.prim, found.t)
         return radiance
 
-    # -----------------------------------------------------------------------------------------
-    # Direct lighting at shading points
 
-    def _direct(self, sp: Shading, radiance: np.ndarray, rng: np.random.Generator) -> None:
-        """Add the direct-lighting estimate of every shading point to ``radiance[sp.lane]``."""
-        st = self.strategy
-        n_light, n_dir = st.light_count, st.direction_count
-        m = len(sp.lane)
-        if st.one_sample and n_light and n_dir:
-            # One-sample MIS: each point takes one technique, chosen with probability c.
-            c_light = n_light / (n_light + n_dir)
-            pick_light = rng.random(m) < c_light
-            lights_idx = np.flatnonzero(pick_light)
-            dirs_idx = np.flatnonzero(~pick_light)
-            self._accumulate(radiance, sp.lane[lights_idx], 1,
-                             self._light_technique(sp.take(lights_idx), c_light, 1.0 - c_light, rng))
-            self._accumulate(radiance, sp.lane[dirs_idx], 1,
-                             self._direction_technique(sp.take(dirs_idx), 1.0 - c_light, c_light, rng))
-            return
-        if n_light:
-            rep = _repeated(sp, n_light)
-            self._accumulate(radiance, sp.lane, n_light, self._light_technique(rep, n_light, n_dir, rng))
-        if n_dir:
-            rep = _repeated(sp, n_dir)
-            self._accumulate(radiance, sp.lane, n_dir, self._direction_technique(rep, n_dir, n_light, rng))
+class RayBuffer(NamedTuple):
+    """Rays from shading points, written by ``_shade``, one row per sample that may contribute.
 
-    @staticmethod
-    def _accumulate(radiance: np.ndarray, lanes: np.ndarray, count: int, contribution: np.ndarray) -> None:
-        """radiance[lanes] += the sum of each lane's ``count`` consecutive contribution rows.
+    origin, dir : (c, 3) float32 for Embree (dir unit length, world).
+    tmax : (c,) float32 shadow-ray length (shadow rays only).
+    value : (c, 3) what the sample adds if its ray is unblocked (shadow) or hits an emitter
+        (direction; then times the emitter's radiance and the MIS weight).
+    pdf : (c,) count-scaled pdf of the direction technique (direction rays only, for MIS).
+    lane : (c,) camera lane the sample belongs to.   delta : (c,) a delta sample (weight 1).
+    """
 
-        ``lanes`` are distinct (one per shading point), so a fancy-indexed add is exact;
-        repeated samples of a point are consecutive rows (see ``_repeated``) and are summed
-        with a reshape, never with the slow ``np.add.at``.
-        """
-        if count > 1:
-            contribution = contribution.reshape(len(lanes), count, 3).sum(axis=1)
-        radiance[lanes] += contribution
+    origin: np.ndarray
+    dir: np.ndarray
+    tmax: np.ndarray
+    value: np.ndarray
+    pdf: np.ndarray
+    lane: np.ndarray
+    delta: np.ndarray
 
-    def _light_technique(self, sp: Shading, own: float, other: float,
-                         rng: np.random.Generator) -> np.ndarray:
-        """One light sample per shading point: f Le |cos| w_l / (own p_l), ``(m, 3)``.
+    @classmethod
+    def empty(cls, count: int) -> "RayBuffer":
+        return cls(np.empty((count, 3), dtype=np.float32), np.empty((count, 3), dtype=np.float32),
+                   np.empty(count, dtype=np.float32), np.empty((count, 3)), np.empty(count),
+                   np.empty(count, dtype=np.int64), np.empty(count, dtype=np.bool_))
 
-        ``own`` scales this technique's pdf (its sample count, or its selection probability in
-        one-sample MIS), ``other`` the direction technique's; other = 0 gives weight 1.
-        """
-        m = len(sp.lane)
-        u_select = rng.random(m)
-        u_point = rng.random((m, 2))
-        ls = self.lights.sample(u_select, u_point, sp.x)
-        wi = sp.frame.to_local(ls.wi)
-        f = sp.bsdf.eval(sp.wo, wi)
-        cos_i = np.maximum(wi[:, 2], 0.0)
-        safe_pdf = np.where(ls.pdf > 0.0, ls.pdf, 1.0)
-        value = f * ls.radiance * (cos_i / (own * safe_pdf))[:, None]
-        value[ls.pdf <= 0.0] = 0.0
 
-        live = np.flatnonzero(np.any(value > 0.0, axis=1))
-        if other > 0.0 and self.strategy.direction_sampler is not None and len(live):
-            pdf_dir = self._direction_pdf(sp.bsdf, sp.wo, wi, live)
-            w = mis.weight(self.strategy.heuristic, own * ls.pdf[live], other * pdf_dir)
-            value[live] *= np.where(ls.delta[live], 1.0, w)[:, None]
-            live = live[np.any(value[live] > 0.0, axis=1)]
+# -------------------------------------------------------------------------------------------------
+# Compiled kernels
 
-        # --- Shadow rays from the offset origin to the sampled point, stopping short of it.
-        target = sp.x[live] + ls.wi[live] * ls.dist[live, None]
-        to_target = target - sp.origin[live]
-        length = np.linalg.norm(to_target, axis=1)
-        blocked = self.caster.occluded(sp.origin[live], to_target / length[:, None],
-                                       np.maximum(length - self.eps, 0.0))
-        value[live[blocked]] = 0.0
-        return value
 
-    def _direction_technique(self, sp: Shading, own: float, other: float,
-                             rng: np.random.Generator) -> np.ndarray:
-        """One direction sample per shading point, traced to the emitter it hits:
-        f |cos| Le w_d / (own p_d), ``(m, 3)``. ``own``/``other`` as in the light technique."""
-        m = len(sp.lane)
-        u = rng.random((m, 2))
-        sampler = self.strategy.direction_sampler
-        if sampler == "bsdf":
-            bs = sp.bsdf.sample(u, sp.wo)
-            wi, weight, pdf, delta = bs.wi, bs.weight, bs.pdf, bs.delta
-        else:
-            if sampler == "uniform":
-                wi = warp.sample_uniform_hemisphere(u)
-                pdf = warp.pdf_uniform_hemisphere(wi)
+@jit
+def _shade(prim, hit_u, hit_v, dirs, key, surfaces: Surfaces, light_tables: LightTables, plan: Plan,
+           radiance, shadow: RayBuffer, direction: RayBuffer):
+    """Camera hits -> emission seen directly into ``radiance (n, 3)``, and the shadow and
+    direction rays of every shading point into the buffers. Returns their counts."""
+    n_shadow = 0
+    n_direction = 0
+    for lane in range(len(prim)):
+        radiance[lane, 0] = radiance[lane, 1] = radiance[lane, 2] = 0.0
+        p = prim[lane]
+        if p < 0:
+            continue
+        g = surfaces.hit_table[p]
+        d = (float(dirs[lane, 0]), float(dirs[lane, 1]), float(dirs[lane, 2]))
+        cos_view = -(g[9] * d[0] + g[10] * d[1] + g[11] * d[2])
+        # Emitters seen directly (weight 1 in every strategy): front side only.
+        if cos_view > 0.0:
+            radiance[lane, 0], radiance[lane, 1], radiance[lane, 2] = g[12], g[13], g[14]
+        material = int(g[15])
+        kind = surfaces.kind[material]
+        if kind == bsdf.NONE or cos_view == 0.0:
+            continue
+        # The shading point: frame around the face normal flipped toward the viewer.
+        u, v = float(hit_u[lane]), float(hit_v[lane])
+        x = (g[0] + u * g[3] + v * g[6], g[1] + u * g[4] + v * g[7], g[2] + u * g[5] + v * g[8])
+        sign = 1.0 if cos_view > 0.0 else -1.0
+        normal = (sign * g[9], sign * g[10], sign * g[11])
+        s, t = basis(normal)
+        wo = to_local(s, t, normal, scale(-1.0, d))
+        origin = add_scaled(x, surfaces.eps, normal)
+        point = (x, origin, s, t, normal, wo, kind, surfaces.reflectance[material], surfaces.alpha[material],
+                 surfaces.eps)
+        stream = rand.lane_stream(key, lane)
+        n_light, n_dir = float(plan.n_light), float(plan.n_dir)
+        if plan.one_sample:
+            if rand.uniform(stream, 0) < plan.c_light:
+                n_shadow = _light_sample(point, lane, stream, 1, plan.c_light, 1.0 - plan.c_light,
+                                         light_tables, plan, shadow, n_shadow)
             else:
-                wi = warp.sample_cosine_hemisphere(u)
-                pdf = warp.pdf_cosine_hemisphere(wi)
-            f = sp.bsdf.eval(sp.wo, wi)
-            safe_pdf = np.where(pdf > 0.0, pdf, 1.0)
-            weight = np.where((pdf > 0.0)[:, None], f * (np.maximum(wi[:, 2], 0.0) / safe_pdf)[:, None], 0.0)
-            delta = np.zeros(m, dtype=bool)
-        value = weight / own
+                n_direction = _direction_sample(point, lane, stream, 1 + 3 * plan.n_light, 1.0 - plan.c_light,
+                                                plan, direction, n_direction)
+            continue
+        for j in range(plan.n_light):
+            n_shadow = _light_sample(point, lane, stream, 1 + 3 * j, n_light, n_dir, light_tables, plan,
+                                     shadow, n_shadow)
+        for j in range(plan.n_dir):
+            n_direction = _direction_sample(point, lane, stream, 1 + 3 * plan.n_light + 2 * j, n_dir,
+                                            plan, direction, n_direction)
+    return n_shadow, n_direction
 
-        live = np.flatnonzero(np.any(value > 0.0, axis=1))
-        # Rotating every lane and dropping the dead ones is cheaper than gathering the frames of
-        # the live ones when most are live (diffuse surfaces).
-        if 2 * len(live) > m:
-            wi_world = sp.frame.to_world(wi)[live]
+
+@jit
+def _light_sample(point, lane, stream, dim, own, other, light_tables, plan, out, row):
+    """One light sample at ``point``: f Le |cos| w_l / (own p_l) into ``out[row]`` with its shadow
+    ray, if it can contribute. ``own`` scales this technique's pdf (its sample count, or its
+    selection probability in one-sample MIS), ``other`` the direction technique's; other = 0
+    gives weight 1. Returns the next free row."""
+    x, origin, s, t, normal, wo, kind, reflectance, alpha, eps = point
+    u_select, u0, u1 = rand.uniform(stream, dim), rand.uniform(stream, dim + 1), rand.uniform(stream, dim + 2)
+    wi_world, dist, le, pdf_light, delta = lights.sample(light_tables, u_select, u0, u1, x)
+    if not pdf_light > 0.0:
+        return row
+    wi = to_local(s, t, normal, wi_world)
+    c = bsdf.shape(kind, alpha, wo, wi) * max(wi[2], 0.0) / (own * pdf_light)
+    if other > 0.0 and plan.sampler != NO_SAMPLER and not delta:
+        pdf_dir = _direction_pdf(plan.sampler, kind, alpha, wo, wi)
+        c *= mis.weight_of(plan.heuristic, own * pdf_light, other * pdf_dir)
+    value = (reflectance[0] * le[0] * c, reflectance[1] * le[1] * c, reflectance[2] * le[2] * c)
+    if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
+        return row
+    # The shadow ray runs from the offset origin to the sampled point and stops short of it.
+    to_target, length = normalized(sub(add_scaled(x, dist, wi_world), origin))
+    out.tmax[row] = max(length - eps, 0.0)
+    _write_ray(out, row, origin, to_target, value, lane)
+    return row + 1
+
+
+@jit
+def _direction_sample(point, lane, stream, dim, own, plan, out, row):
+    """One direction sample at ``point``: f |cos| / (own p_d) into ``out[row]`` with its ray and
+    count-scaled pdf; ``_gather`` multiplies in the emitter it hits and the MIS weight.
+    Returns the next free row."""
+    x, origin, s, t, normal, wo, kind, reflectance, alpha, eps = point
+    u0, u1 = rand.uniform(stream, dim), rand.uniform(stream, dim + 1)
+    delta = False
+    if plan.sampler == BSDF:
+        wi, weight, pdf_dir, delta = bsdf.sample(kind, alpha, wo, u0, u1)
+    else:
+        if plan.sampler == UNIFORM:
+            wi = warp.uniform_hemisphere(u0, u1)
+            pdf_dir = warp.uniform_hemisphere_pdf(wi[2])
         else:
-            wi_world = sp.frame.take(live).to_world(wi[live])
-        hits = self.caster.intersect(sp.origin[live], wi_world)
-        found = hits.prim >= 0
-        live, wi_world = live[found], wi_world[found]
-        prim, dist = hits.prim[found], hits.t[found]
-        s = self.scene
-        g = s.hit_table[prim]
-        front = np.einsum("ij,ij->i", g[:, 9:12], wi_world) < 0.0
-        emitted = g[:, 12:15] * front[:, None]
+            wi = warp.cosine_hemisphere(u0, u1)
+            pdf_dir = warp.cosine_hemisphere_pdf(wi[2])
+        weight = bsdf.shape(kind, alpha, wo, wi) * max(wi[2], 0.0) / pdf_dir if pdf_dir > 0.0 else 0.0
+    c = weight / own
+    value = (reflectance[0] * c, reflectance[1] * c, reflectance[2] * c)
+    if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
+        return row
+    out.pdf[row] = own * pdf_dir
+    out.delta[row] = delta
+    _write_ray(out, row, origin, to_world(s, t, normal, wi), value, lane)
+    return row + 1
 
-        w = np.ones(len(live))
-        if other > 0.0:
-            pdf_light = self.lights.pdf(prim, wi_world, dist)
-            w = np.where(delta[live], 1.0, mis.weight(self.strategy.heuristic, own * pdf[live],
-                                                      other * pdf_light))
-        result = np.zeros((m, 3))
-        result[live] = value[live] * emitted * w[:, None]
-        return result
 
-    def _direction_pdf(self, bsdf: Bsdf, wo: np.ndarray, wi: np.ndarray, idx: np.ndarray) -> np.ndarray:
-        """pdf of the direction technique for light-sampled ``wi[idx]`` (for MIS weights)."""
-        sampler = self.strategy.direction_sampler
-        wi_i = wi[idx]
-        if sampler == "uniform":
-            return warp.pdf_uniform_hemisphere(wi_i)
-        if sampler == "cosine":
-            return warp.pdf_cosine_hemisphere(wi_i)
-        return bsdf.take(idx).pdf(wo[idx], wi_i)
+@jit
+def _write_ray(out, row, origin, direction, value, lane):
+    for k in range(3):
+        out.origin[row, k] = origin[k]
+        out.dir[row, k] = direction[k]
+        out.value[row, k] = value[k]
+    out.lane[row] = lane
+
+
+@jit
+def _direction_pdf(sampler, kind, alpha, wo, wi):
+    """pdf of the direction technique for a light-sampled ``wi`` (for MIS weights)."""
+    if sampler == UNIFORM:
+        return warp.uniform_hemisphere_pdf(wi[2])
+    if sampler == COSINE:
+        return warp.cosine_hemisphere_pdf(wi[2])
+    return bsdf.pdf(kind, alpha, wo, wi)
+
+
+@jit
+def _gather(radiance, surfaces: Surfaces, light_tables: LightTables, plan: Plan, shadow: RayBuffer, blocked,
+            direction: RayBuffer, prim, dist):
+    """Add to ``radiance`` the light samples whose shadow rays are unblocked, and the direction
+    samples whose rays hit the front of an emitter, weighted against the light technique."""
+    for row in range(len(blocked)):
+        if not blocked[row]:
+            lane = shadow.lane[row]
+            for k in range(3):
+                radiance[lane, k] += shadow.value[row, k]
+    other = plan.c_light if plan.one_sample else float(plan.n_light)
+    for row in range(len(prim)):
+        p = prim[row]
+        if p < 0:
+            continue
+        g = surfaces.hit_table[p]
+        wi = (float(direction.dir[row, 0]), float(direction.dir[row, 1]), float(direction.dir[row, 2]))
+        if not g[9] * wi[0] + g[10] * wi[1] + g[11] * wi[2] < 0.0:  # emitters shine from the front
+            continue
+        w = 1.0
+        if other > 0.0 and not direction.delta[row]:
+            w = mis.weight_of(plan.heuristic, direction.pdf[row],
+                              other * lights.pdf(light_tables, p, wi, float(dist[row])))
+        lane = direction.lane[row]
+        for k in range(3):
+            radiance[lane, k] += direction.value[row, k] * g[12 + k] * w

@@ -21,6 +21,7 @@ import numpy as np
 
 from .atomic import atomic_write
 from .errors import InputError
+from .jit import jit
 
 CHANNELS = ("R", "G", "B", "variance.R", "variance.G", "variance.B")
 COUNT_CHANNEL = "samples"
@@ -55,29 +56,14 @@ class Film:
 
     def add_block(self, first_pixel: int, samples: np.ndarray) -> None:
         """Add ``samples (npix, k, 3)``: k samples for each of pixels first_pixel, ... ."""
-        npix, k, _ = samples.shape
-        mean_b = samples.mean(axis=1)
-        m2_b = np.sum((samples - mean_b[:, None, :]) ** 2, axis=1)
-        self._merge(slice(first_pixel, first_pixel + npix), np.int64(k), mean_b, m2_b)
+        _add_block(self.count, self.mean, self.m2, first_pixel, samples)
 
     def merge(self, other: "Film") -> None:
         """Fold ``other`` (same resolution) into this film, pixel by pixel, exactly."""
         if (other.width, other.height) != (self.width, self.height):
             raise InputError(f"cannot merge a {other.width}x{other.height} film into a "
                              f"{self.width}x{self.height} one")
-        self._merge(slice(None), other.count, other.mean, other.m2)
-
-    def _merge(self, where: slice, n_b: Any, mean_b: np.ndarray, m2_b: np.ndarray) -> None:
-        # Chan, Golub and LeVeque (1979): combine (n, mean, M2) of two disjoint sample sets.
-        n_a = self.count[where]
-        n_b = np.broadcast_to(n_b, n_a.shape)
-        n = n_a + n_b
-        safe_n = np.where(n > 0, n, 1).astype(np.float64)
-        delta = mean_b - self.mean[where]
-        mean = self.mean[where] + delta * (n_b / safe_n)[:, None]
-        m2 = self.m2[where] + m2_b + delta * delta * (n_a * (n_b / safe_n))[:, None]
-        # Assign only after everything is computed, so Ctrl-C cannot leave a half-merged pixel run.
-        self.mean[where], self.m2[where], self.count[where] = mean, m2, n
+        _merge(self.count, self.mean, self.m2, other.count, other.mean, other.m2)
 
     def variance(self) -> np.ndarray:
         """(P, 3) unbiased variance of one sample's estimate; 0 where count < 2."""
@@ -218,6 +204,54 @@ def to_srgb8(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     # sRGB transfer function (IEC 61966-2-1).
     srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
     return np.rint(srgb * 255.0).astype(np.uint8)
+
+
+@jit
+def _fold(count, mean, m2, pixel, n_b, mean_b, m2_b) -> None:
+    """Fold the statistics ``(n_b, mean_b (3,), m2_b (3,))`` of a disjoint sample set into one
+    pixel (Chan, Golub and LeVeque 1979)."""
+    n_a = count[pixel]
+    n = n_a + n_b
+    if n == 0:
+        return
+    share = n_b / n
+    for c in range(3):
+        delta = mean_b[c] - mean[pixel, c]
+        mean[pixel, c] += delta * share
+        m2[pixel, c] += m2_b[c] + delta * delta * n_a * share
+    count[pixel] = n
+
+
+# Compiled code runs to its end before Python sees a Ctrl-C, so neither of these can leave a
+# pixel half-merged.
+
+
+@jit
+def _merge(count, mean, m2, n_b, mean_b, m2_b) -> None:
+    """Fold a whole film's ``(count, mean, m2)`` into another's."""
+    for pixel in range(len(n_b)):
+        _fold(count, mean, m2, pixel, n_b[pixel], mean_b[pixel], m2_b[pixel])
+
+
+@jit
+def _add_block(count, mean, m2, first, samples) -> None:
+    """Fold ``samples (npix, k, 3)`` into pixels first, first + 1, ...: each pixel's k samples
+    are reduced to (k, mean, M2) by two passes, then folded in."""
+    npix, k, _ = samples.shape
+    mean_b = np.empty(3)
+    m2_b = np.empty(3)
+    for row in range(npix):
+        for c in range(3):
+            total = 0.0
+            for j in range(k):
+                total += samples[row, j, c]
+            mean_b[c] = total / k
+            sq = 0.0
+            for j in range(k):
+                dev = samples[row, j, c] - mean_b[c]
+                sq += dev * dev
+            m2_b[c] = sq
+        _fold(count, mean, m2, first + row, k, mean_b, m2_b)
 
 
 def write_png(path: str | os.PathLike[str], image: np.ndarray, exposure: float = 0.0,

@@ -1,46 +1,67 @@
-"""Orthonormal shading frames: world <-> local, where the local z axis is the normal.
+"""3-vectors as tuples and orthonormal shading frames, for per-lane compiled code.
 
-BSDF math happens in the local frame (pbrt's ``LocalFromRender``), so names carry their
-space: ``wo_local``, ``wi_world``.
+A vector is a ``(x, y, z)`` tuple of floats: numba keeps it in registers. BSDF math happens in
+the local frame whose z axis is the normal (pbrt's ``LocalFromRender``), so names carry
+their space: ``wo_local``, ``wi_world``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
 
-import numpy as np
+from .jit import jit
 
 
-@dataclass(frozen=True)
-class Frame:
-    """Per-lane orthonormal bases. ``s, t, n``: ``(n, 3)`` float64 unit vectors, right-handed."""
+@jit
+def dot(a, b) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
-    s: np.ndarray
-    t: np.ndarray
-    n: np.ndarray
 
-    @classmethod
-    def from_normal(cls, n: np.ndarray) -> "Frame":
-        """Branchless basis around unit normals ``n (n, 3)`` (Duff et al. 2017, JCGT 6(1))."""
-        sign = np.where(n[:, 2] >= 0.0, 1.0, -1.0)
-        a = -1.0 / (sign + n[:, 2])
-        b = n[:, 0] * n[:, 1] * a
-        s = np.stack([1.0 + sign * n[:, 0] * n[:, 0] * a, sign * b, -sign * n[:, 0]], axis=1)
-        t = np.stack([b, sign + n[:, 1] * n[:, 1] * a, -n[:, 1]], axis=1)
-        return cls(s, t, n)
+@jit
+def add_scaled(a, s: float, b):
+    """a + s b."""
+    return (a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2])
 
-    def to_local(self, w: np.ndarray) -> np.ndarray:
-        """World ``(n, 3)`` -> local ``(n, 3)``."""
-        out = np.empty_like(w)
-        out[:, 0] = np.einsum("ij,ij->i", w, self.s)
-        out[:, 1] = np.einsum("ij,ij->i", w, self.t)
-        out[:, 2] = np.einsum("ij,ij->i", w, self.n)
-        return out
 
-    def to_world(self, w: np.ndarray) -> np.ndarray:
-        """Local ``(n, 3)`` -> world ``(n, 3)``."""
-        return w[:, 0:1] * self.s + w[:, 1:2] * self.t + w[:, 2:3] * self.n
+@jit
+def scale(s: float, a):
+    return (s * a[0], s * a[1], s * a[2])
 
-    def take(self, idx: np.ndarray) -> "Frame":
-        """The frames of lanes ``idx``."""
-        return Frame(self.s[idx], self.t[idx], self.n[idx])
+
+@jit
+def sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@jit
+def basis(n):
+    """(s, t): unit vectors completing unit ``n`` to a right-handed frame (s, t, n), without
+    branches on the normal's direction (Duff et al. 2017, JCGT 6(1))."""
+    sign = 1.0 if n[2] >= 0.0 else -1.0
+    a = -1.0 / (sign + n[2])
+    b = n[0] * n[1] * a
+    s = (1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0])
+    t = (b, sign + n[1] * n[1] * a, -n[1])
+    return s, t
+
+
+@jit
+def to_local(s, t, n, w):
+    """World ``w`` in the frame (s, t, n)."""
+    return (dot(w, s), dot(w, t), dot(w, n))
+
+
+@jit
+def to_world(s, t, n, w):
+    """Local ``w`` of the frame (s, t, n) in world space."""
+    return (w[0] * s[0] + w[1] * t[0] + w[2] * n[0],
+            w[0] * s[1] + w[1] * t[1] + w[2] * n[1],
+            w[0] * s[2] + w[1] * t[2] + w[2] * n[2])
+
+
+@jit
+def normalized(a):
+    """``a / |a|``, and the length; a zero vector stays zero."""
+    length = math.sqrt(dot(a, a))
+    inv = 1.0 / length if length > 0.0 else 0.0
+    return (a[0] * inv, a[1] * inv, a[2] * inv), length

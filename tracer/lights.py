@@ -11,15 +11,22 @@ Emitters are the emissive triangles of area lights (front side only) and point l
 For an area light the solid-angle pdf of the direction toward point y on triangle t is
 p_w = P(t) / area(t) * d^2 / |cos theta_light| (pbrt-v4 section 12.2). The selection
 probability is multiplied in here, where it belongs, so MIS sees the full light pdf.
+
+The per-lane functions ``sample`` and ``pdf`` are compiled (``tracer.jit``) for the
+estimator's kernels and read the flat tables of ``LightTables``; ``LightSampler`` builds those
+tables once per scene and runs the same code over batches (tests, tools).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from . import warp
+from .jit import jit
 from .scene import Scene
 
 SELECTIONS = ("power", "uniform")
@@ -67,6 +74,89 @@ def _alias_table(pmf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return prob, alias
 
 
+class LightTables(NamedTuple):
+    """What the per-lane light functions read. K candidates: T emissive triangles first, then
+    P point lights.
+
+    alias_prob : (K,) float64 and alias : (K,) int64, Walker's table over the candidates.
+    pmf : (K,) selection probabilities.
+    area : (T, 16) per triangle candidate: v0 (3), edge1 (3), edge2 (3), normal (3),
+        emission (3), selection pmf / area (1).
+    point : (P, 6) per point candidate: position (3), intensity (3).
+    by_triangle : (F, 4) per scene triangle: normal (3), selection pmf / area (1; 0 for
+        non-emitters), for the pdf of a direction that hits it.
+    """
+
+    alias_prob: np.ndarray
+    alias: np.ndarray
+    pmf: np.ndarray
+    area: np.ndarray
+    point: np.ndarray
+    by_triangle: np.ndarray
+
+
+@jit
+def pick(tables: LightTables, u_select: float) -> int:
+    """A candidate index distributed by ``pmf``, by Walker's alias method: the integer part of
+    u K picks a column, the fraction decides between the column and its alias. O(1) per
+    sample, unlike a binary search of the CDF."""
+    count = len(tables.alias)
+    scaled = u_select * count
+    column = min(int(scaled), count - 1)
+    return column if scaled - column < tables.alias_prob[column] else tables.alias[column]
+
+
+@jit
+def sample(tables: LightTables, u_select: float, u0: float, u1: float, x):
+    """Sample a light for shading point ``x`` (world). Returns ``(wi, dist, le, pdf, delta)``:
+
+    wi : world unit direction from x toward the light.   dist : distance to the sampled point.
+    le : RGB radiance arriving along wi (area), or I / d^2 (point); the contribution is
+        f |cos theta_i| le / pdf. Zero where the sample is invalid.
+    pdf : solid-angle pdf including the selection probability; for a point light, its selection
+        probability alone. 0 where invalid.
+    delta : a point light (no other technique can produce this sample).
+    """
+    zero = (0.0, 0.0, 0.0)
+    if len(tables.alias) == 0:
+        return (0.0, 0.0, 1.0), 0.0, zero, 0.0, False
+    k = pick(tables, u_select)
+    n_tri = len(tables.area)
+    if k < n_tri:
+        g = tables.area[k]
+        b1, b2 = warp.triangle_barycentric(u0, u1)
+        lx = g[0] + b1 * g[3] + b2 * g[6] - x[0]
+        ly = g[1] + b1 * g[4] + b2 * g[7] - x[1]
+        lz = g[2] + b1 * g[5] + b2 * g[8] - x[2]
+        d2 = lx * lx + ly * ly + lz * lz
+        d = math.sqrt(d2)
+        if d <= 0.0:
+            return (0.0, 0.0, 1.0), 0.0, zero, 0.0, False
+        wi = (lx / d, ly / d, lz / d)
+        cos_light = -(g[9] * wi[0] + g[10] * wi[1] + g[11] * wi[2])
+        if cos_light <= 0.0:  # front side only
+            return wi, d, zero, 0.0, False
+        return wi, d, (g[12], g[13], g[14]), g[15] * d2 / cos_light, False
+    p = tables.point[k - n_tri]
+    lx, ly, lz = p[0] - x[0], p[1] - x[1], p[2] - x[2]
+    d2 = lx * lx + ly * ly + lz * lz
+    d = math.sqrt(d2)
+    if d <= 0.0:
+        return (0.0, 0.0, 1.0), 0.0, zero, 0.0, True
+    return (lx / d, ly / d, lz / d), d, (p[3] / d2, p[4] / d2, p[5] / d2), tables.pmf[k], True
+
+
+@jit
+def pdf(tables: LightTables, prim: int, wi, dist: float) -> float:
+    """Solid-angle pdf with which :func:`sample` picks direction ``wi`` (world) that hits
+    triangle ``prim`` at distance ``dist``; 0 for non-emitters and back sides."""
+    g = tables.by_triangle[prim]
+    cos_light = -(g[0] * wi[0] + g[1] * wi[1] + g[2] * wi[2])
+    if g[3] <= 0.0 or cos_light <= 0.0:
+        return 0.0
+    return g[3] * dist * dist / cos_light
+
+
 class LightSampler:
     """The emitters of a scene with their selection distribution."""
 
@@ -96,96 +186,49 @@ class LightSampler:
         total = weight.sum()
         self.count = len(weight)
         self.pmf = weight / total if self.count else weight
-        self.alias_prob, self.alias = _alias_table(self.pmf)
-        # Selection probability of every scene triangle (0 for non-emitters), for pdf().
-        self.pmf_of_triangle = np.zeros(len(scene.faces))
-        self.pmf_of_triangle[tri] = self.pmf[: len(tri)]
-        # One row per area candidate, so that a sample gathers its triangle in one go:
-        # v0 (3), edge1 (3), edge2 (3), normal (3), emission (3), selection pmf / area (1).
-        self.area_table = np.concatenate(
-            [
-                scene.v0[tri],
-                scene.edge1[tri],
-                scene.edge2[tri],
-                scene.normal[tri],
-                scene.emission[tri],
-                (self.pmf[: len(tri)] / np.where(scene.area[tri] > 0.0, scene.area[tri], 1.0))[:, None],
-            ],
-            axis=1,
+        alias_prob, alias = _alias_table(self.pmf)
+        pmf_over_area = self.pmf[: len(tri)] / scene.area[tri]  # area > 0 by the choice of tri
+        by_triangle = np.zeros((len(scene.faces), 4))
+        by_triangle[:, 0:3] = scene.normal
+        by_triangle[tri, 3] = pmf_over_area
+        self.tables = LightTables(
+            alias_prob=alias_prob,
+            alias=alias,
+            pmf=self.pmf,
+            area=np.ascontiguousarray(np.concatenate(
+                [scene.v0[tri], scene.edge1[tri], scene.edge2[tri], scene.normal[tri],
+                 scene.emission[tri], pmf_over_area[:, None]], axis=1).reshape(len(tri), 16)),
+            point=np.ascontiguousarray(np.concatenate(
+                [scene.point_position[points], scene.point_intensity[points]], axis=1).reshape(-1, 6)),
+            by_triangle=by_triangle,
         )
-
-    def pick(self, u_select: np.ndarray) -> np.ndarray:
-        """Candidate indices ``(n,)`` distributed by ``pmf``, by Walker's alias method (Vose's
-        construction): the integer part of u K picks a column, the fraction decides between the
-        column and its alias. O(1) per sample, unlike a binary search of the CDF."""
-        scaled = u_select * self.count
-        column = np.minimum(scaled.astype(np.int64), self.count - 1)
-        return np.where(scaled - column < self.alias_prob[column], column, self.alias[column])
 
     def sample(self, u_select: np.ndarray, u_point: np.ndarray, x: np.ndarray) -> LightSample:
         """Sample a light for shading points ``x (n, 3)``; ``u_select (n,)``, ``u_point (n, 2)``."""
-        n = len(x)
-        if self.count == 0:
-            wi = np.zeros((n, 3))
-            wi[:, 2] = 1.0
-            return LightSample(wi, np.zeros(n), np.zeros((n, 3)), np.zeros(n), np.zeros(n, dtype=bool))
-        pick = self.pick(u_select)
-        n_tri = len(self.triangles)
-        if len(self.points) == 0:  # the common case: area lights only, no index arrays needed
-            return self._sample_area(pick, u_point, x)
-        if n_tri == 0:
-            return self._sample_points(pick, x)
-        out = LightSample(
-            np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros(n), np.zeros(n, dtype=bool)
-        )
-        for lanes, part in (
-            (np.flatnonzero(pick < n_tri), self._sample_area),
-            (np.flatnonzero(pick >= n_tri), None),
-        ):
-            if not len(lanes):
-                continue
-            sub = (
-                part(pick[lanes], u_point[lanes], x[lanes])
-                if part is not None
-                else self._sample_points(pick[lanes], x[lanes])
-            )
-            out.wi[lanes], out.dist[lanes], out.radiance[lanes] = sub.wi, sub.dist, sub.radiance
-            out.pdf[lanes], out.delta[lanes] = sub.pdf, sub.delta
-        return out
-
-    def _sample_area(self, pick: np.ndarray, u_point: np.ndarray, x: np.ndarray) -> LightSample:
-        """Points on the picked emissive triangles (``pick`` < number of triangles)."""
-        g = self.area_table[pick]
-        b = warp.sample_triangle_barycentric(u_point)
-        y = g[:, 0:3] + b[:, 0:1] * g[:, 3:6] + b[:, 1:2] * g[:, 6:9]
-        to_light = y - x
-        d2 = np.einsum("ij,ij->i", to_light, to_light)
-        d = np.sqrt(d2)
-        ok = d > 0.0
-        wi = to_light / np.where(ok, d, 1.0)[:, None]
-        cos_light = -np.einsum("ij,ij->i", g[:, 9:12], wi)
-        ok &= cos_light > 0.0  # front side only
-        radiance = g[:, 12:15] * ok[:, None]
-        pdf = np.where(ok, g[:, 15] * d2 / np.where(ok, cos_light, 1.0), 0.0)
-        return LightSample(wi, d, radiance, pdf, np.zeros(len(pick), dtype=bool))
-
-    def _sample_points(self, pick: np.ndarray, x: np.ndarray) -> LightSample:
-        """The picked point lights (``pick`` >= number of triangles): delta samples."""
-        p = self.points[pick - len(self.triangles)]
-        to_light = self.scene.point_position[p] - x
-        d2 = np.einsum("ij,ij->i", to_light, to_light)
-        d = np.sqrt(d2)
-        ok = d > 0.0
-        safe_d = np.where(ok, d, 1.0)
-        wi = to_light / safe_d[:, None]
-        radiance = self.scene.point_intensity[p] / np.where(ok, d2, 1.0)[:, None] * ok[:, None]
-        return LightSample(wi, d, radiance, np.where(ok, self.pmf[pick], 0.0), np.ones(len(pick), dtype=bool))
+        return LightSample(*_sample_lanes(self.tables, u_select, u_point, x))
 
     def pdf(self, prim: np.ndarray, wi: np.ndarray, dist: np.ndarray) -> np.ndarray:
         """Solid-angle pdf with which :meth:`sample` would pick direction ``wi (n, 3)`` that hits
         triangle ``prim (n,)`` at distance ``dist (n,)``; 0 for non-emitters and back sides."""
-        s = self.scene
-        pmf = self.pmf_of_triangle[prim]
-        cos_light = -np.sum(s.normal[prim] * wi, axis=1)
-        ok = (pmf > 0.0) & (cos_light > 0.0)
-        return np.where(ok, pmf / np.where(ok, s.area[prim] * cos_light, 1.0) * dist * dist, 0.0)
+        return _pdf_lanes(self.tables, prim, wi, dist)
+
+
+@jit
+def _sample_lanes(tables, u_select, u_point, x):
+    n = len(u_select)
+    wi, dist, le = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
+    p, delta = np.empty(n), np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        w, dist[i], radiance, p[i], delta[i] = sample(tables, u_select[i], u_point[i, 0], u_point[i, 1],
+                                                      (x[i, 0], x[i, 1], x[i, 2]))
+        wi[i, 0], wi[i, 1], wi[i, 2] = w
+        le[i, 0], le[i, 1], le[i, 2] = radiance
+    return wi, dist, le, p, delta
+
+
+@jit
+def _pdf_lanes(tables, prim, wi, dist):
+    out = np.empty(len(prim))
+    for i in range(len(prim)):
+        out[i] = pdf(tables, prim[i], (wi[i, 0], wi[i, 1], wi[i, 2]), dist[i])
+    return out

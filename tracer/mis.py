@@ -9,29 +9,53 @@ technique has pdf 0 for them.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from .jit import jit
+
 HEURISTICS = ("balance", "power", "max")
-POWER_BETA = 2.0
+BALANCE, POWER, MAX = 0, 1, 2  # codes of HEURISTICS for compiled code
+POWER_BETA = 2.0  # the power heuristic below squares: beta = 2 as in Veach's thesis
 
 
-def weight(heuristic: str, mine: np.ndarray, other: np.ndarray) -> np.ndarray:
-    """The weight of a sample whose own (count-scaled) pdf is ``mine`` when the other
-    technique's is ``other``; both ``(n,)``, >= 0. Returns ``(n,)`` in [0, 1].
+@jit
+def weight_of(heuristic: int, mine: float, other: float) -> float:
+    """The weight in [0, 1] of a sample whose own (count-scaled) pdf is ``mine`` when the other
+    technique's is ``other`` (both >= 0); ``heuristic`` is a code BALANCE, POWER or MAX.
 
     Written through the ratio other/mine so that huge or infinite pdfs (near-specular lobes)
     give 1 or 0 instead of inf/inf = NaN; a sample with mine = 0 gets 0.
     """
-    positive = mine > 0.0
-    ratio = np.where(positive, other / np.where(positive, mine, 1.0), np.inf)
-    ratio = np.nan_to_num(ratio, nan=1.0)  # inf / inf: equal pdfs in the limit
-    if heuristic == "balance":
-        w = 1.0 / (1.0 + ratio)
-    elif heuristic == "power":
-        w = 1.0 / (1.0 + ratio**POWER_BETA)
-    elif heuristic == "max":
-        # Ties go to neither side's advantage: split them so weights still sum to one.
-        w = np.where(ratio < 1.0, 1.0, np.where(ratio == 1.0, 0.5, 0.0))
-    else:
+    if not mine > 0.0:
+        return 0.0
+    ratio = other / mine
+    if math.isnan(ratio):  # inf / inf: equal pdfs in the limit
+        ratio = 1.0
+    if heuristic == BALANCE:
+        return 1.0 / (1.0 + ratio)
+    if heuristic == POWER:
+        return 1.0 / (1.0 + ratio * ratio)
+    # Maximum: ties go to neither side's advantage; split them so weights still sum to one.
+    return 1.0 if ratio < 1.0 else (0.5 if ratio == 1.0 else 0.0)
+
+
+def code(heuristic: str) -> int:
+    """The code of a heuristic name."""
+    if heuristic not in HEURISTICS:
         raise ValueError(f"unknown heuristic {heuristic!r}; expected one of {HEURISTICS}")
-    return np.where(positive, w, 0.0)
+    return HEURISTICS.index(heuristic)
+
+
+def weight(heuristic: str, mine: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """:func:`weight_of` over arrays ``mine, other (n,)`` -> ``(n,)``."""
+    return _weights(code(heuristic), np.asarray(mine, dtype=np.float64), np.asarray(other, dtype=np.float64))
+
+
+@jit
+def _weights(heuristic, mine, other):
+    out = np.empty(len(mine))
+    for i in range(len(mine)):
+        out[i] = weight_of(heuristic, mine[i], other[i])
+    return out

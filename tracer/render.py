@@ -2,10 +2,11 @@
 
 A render is cut into batches fixed by the resolution and spp alone: ``k`` samples for each
 of a run of consecutive pixels, ``batch_lanes`` lanes at most. Each batch draws its random
-numbers from its own generator, keyed by (seed, first sample index, first pixel), and batches
+numbers from keys that its own generator gives, keyed by (seed, first sample index, first
+pixel); see ``tracer.rand``. Batches
 are merged into the film in a fixed order. So the same seed gives the same image bit for bit
 whatever the number of threads (``DESIGN.md``). Threads overlap the batches: Embree and the
-large numpy operations release the GIL.
+compiled kernels release the GIL.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import rand
 from .estimators import DirectLighting, Strategy
 from .film import Film
 from .scene import Scene
@@ -116,7 +118,8 @@ def render_batch(estimator: DirectLighting, batch: Batch, seed: int) -> tuple[np
     rng = np.random.Generator(np.random.Philox(np.random.SeedSequence(
         [seed, batch.first_sample, batch.first_pixel])))
     pixel = np.repeat(np.arange(batch.first_pixel, batch.first_pixel + batch.npix), batch.k)
-    origins, dirs = estimator.scene.camera.rays(pixel, rng.random((batch.lanes, 2)))
+    jitter = rand.uniform_block(rand.batch_key(rng), batch.lanes, 2)
+    origins, dirs = estimator.scene.camera.rays(pixel, jitter)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         radiance = estimator.radiance(origins, dirs, rng)
     bad = ~np.all(np.isfinite(radiance), axis=1)

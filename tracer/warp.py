@@ -1,129 +1,233 @@
 """Warps from the unit square to directions and points, each beside its pdf.
 
-Every routine comes as a pair ``sample_x(u, ...) -> values`` and ``pdf_x(values, ...) -> p``
+Every routine comes as a pair ``x(u0, u1, ...) -> value`` and ``x_pdf(value, ...) -> p``
 (Nori's ``squareToX``/``squareToXPdf``, pbrt-v4's ``SampleX``/``XPDF``). A pdf is a pure
 function of its arguments, so MIS may evaluate one technique's pdf on another's samples.
 
-Directions live in a local frame whose z axis is the shading normal. Arrays are float64:
-``u`` is ``(n, 2)`` in [0, 1)^2, directions are ``(n, 3)`` unit vectors, pdfs are ``(n,)``
-with respect to solid angle unless the name says area.
+The per-lane functions take and return floats and ``(x, y, z)`` tuples and are compiled
+(``tracer.jit``) for the estimator's kernels. Below them, array versions with the same
+names prefixed ``sample_``/``pdf_`` run the very same compiled code over batches, for tests
+and the primer: ``u`` is ``(n, 2)`` in [0, 1)^2, directions ``(n, 3)`` unit vectors, pdfs
+``(n,)``, all float64, with respect to solid angle unless the name says area.
+
+Directions live in a local frame whose z axis is the shading normal.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-INV_PI = 1.0 / np.pi
-INV_2PI = 0.5 / np.pi
+from .jit import jit
+
+INV_PI = 1.0 / math.pi
+INV_2PI = 0.5 / math.pi
 
 
+# ---------------------------------------------------------------------------------------------
+# Per-lane warps
+
+
+@jit
+def uniform_hemisphere(u0: float, u1: float):
+    """Uniform direction on the hemisphere z >= 0."""
+    z = u0
+    r = math.sqrt(max(0.0, 1.0 - z * z))
+    phi = 2.0 * math.pi * u1
+    return (r * math.cos(phi), r * math.sin(phi), z)
+
+
+@jit
+def uniform_hemisphere_pdf(z: float) -> float:
+    """Solid-angle pdf of :func:`uniform_hemisphere` at a direction with cos(theta) = z."""
+    return INV_2PI if z > 0.0 else 0.0
+
+
+@jit
+def cosine_hemisphere(u0: float, u1: float):
+    """Cosine-weighted direction on z >= 0 (Malley's method: a uniform point on the unit disk,
+    by the polar map r = sqrt(u0), lifted to the hemisphere)."""
+    r = math.sqrt(u0)
+    phi = 2.0 * math.pi * u1
+    return (r * math.cos(phi), r * math.sin(phi), math.sqrt(max(0.0, 1.0 - u0)))
+
+
+@jit
+def cosine_hemisphere_pdf(z: float) -> float:
+    """Solid-angle pdf of :func:`cosine_hemisphere`: cos(theta) / pi where z > 0."""
+    return max(z, 0.0) * INV_PI
+
+
+@jit
+def triangle_barycentric(u0: float, u1: float):
+    """Uniform barycentrics ``(b1, b2)``; the point is ``v0 + b1 (v1 - v0) + b2 (v2 - v0)``.
+    Heitz's 2019 low-distortion square-to-triangle map: the smaller coordinate is offset to fold
+    the square's two halves onto the triangle, so nearby ``u`` give nearby points."""
+    if u1 > u0:
+        return u0 * 0.5, u1 - u0 * 0.5
+    return u0 - u1 * 0.5, u1 * 0.5
+
+
+@jit
+def ggx_sigma(cos: float, alpha: float) -> float:
+    """cos(theta) sqrt(1 + alpha^2 tan^2 theta) = sqrt(alpha^2 + (1 - alpha^2) cos^2), the term
+    through which Smith's GGX masking enters every formula here (Heitz 2014, JCGT 3(2), eq. 86:
+    Lambda = (sqrt(1 + alpha^2 tan^2) - 1) / 2)."""
+    a2 = alpha * alpha
+    return math.sqrt(a2 + (1.0 - a2) * cos * cos)
+
+
+@jit
+def ggx_g1(cos: float, alpha: float) -> float:
+    """Smith masking G1 = 1 / (1 + Lambda) = 2 cos / (cos + sigma) of a direction with
+    cos(theta) = ``cos``; 0 where cos <= 0."""
+    return 2.0 * cos / (cos + ggx_sigma(cos, alpha)) if cos > 0.0 else 0.0
+
+
+@jit
+def ggx_d(cos_h: float, alpha: float) -> float:
+    """GGX (Trowbridge-Reitz) normal distribution D(h) for cos(theta_h) = ``cos_h``:
+    alpha^2 / (pi (cos^2 (alpha^2 - 1) + 1)^2), normalized so that the integral of D(h) cos(theta_h)
+    over the hemisphere is 1 (Walter et al. 2007, eq. 33)."""
+    return ggx_d_cos2(cos_h * cos_h, alpha) if cos_h > 0.0 else 0.0
+
+
+@jit
+def ggx_d_cos2(cos2_h: float, alpha: float) -> float:
+    """:func:`ggx_d` from cos^2(theta_h), for a half vector known to point up."""
+    a2 = alpha * alpha
+    denom = cos2_h * (a2 - 1.0) + 1.0
+    return a2 / (math.pi * denom * denom)
+
+
+@jit
+def ggx_visible_normal(wo, alpha: float, u0: float, u1: float):
+    """A half vector h distributed as the GGX normals visible from local ``wo`` (wo.z > 0),
+    Heitz 2018, JCGT 7(4): density D_wo(h) = G1(wo) max(0, wo.h) D(h) / wo.z in solid angle."""
+    # Stretch wo to the configuration where the microsurface is a unit hemisphere.
+    vx, vy, vz = alpha * wo[0], alpha * wo[1], wo[2]
+    inv = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
+    vx, vy, vz = vx * inv, vy * inv, vz * inv
+    # Orthonormal basis (v, t1, t2); t1 is perpendicular to v in the xy-plane.
+    len2 = vx * vx + vy * vy
+    if len2 > 0.0:
+        inv_len = 1.0 / math.sqrt(len2)
+        t1x, t1y = -vy * inv_len, vx * inv_len
+    else:
+        t1x, t1y = 1.0, 0.0
+    t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x  # v x t1 with t1.z = 0
+    # Uniform point on the disk, then squash its upper half into the projected visible area.
+    r = math.sqrt(u0)
+    phi = 2.0 * math.pi * u1
+    p1 = r * math.cos(phi)
+    p2 = r * math.sin(phi)
+    s = 0.5 * (1.0 + vz)
+    p2 = (1.0 - s) * math.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
+    p3 = math.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
+    nx = p1 * t1x + p2 * t2x + p3 * vx
+    ny = p1 * t1y + p2 * t2y + p3 * vy
+    nz = p2 * t2z + p3 * vz
+    # Unstretch back to the ellipsoid configuration.
+    hx, hy, hz = alpha * nx, alpha * ny, max(nz, 0.0)
+    inv = 1.0 / math.sqrt(hx * hx + hy * hy + hz * hz)
+    return (hx * inv, hy * inv, hz * inv)
+
+
+@jit
+def ggx_visible_normal_pdf(h, wo, alpha: float) -> float:
+    """Solid-angle density of h under :func:`ggx_visible_normal`."""
+    if wo[2] <= 0.0:
+        return 0.0
+    wo_dot_h = max(wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2], 0.0)
+    return ggx_g1(wo[2], alpha) * wo_dot_h * ggx_d(h[2], alpha) / wo[2]
+
+
+# ---------------------------------------------------------------------------------------------
+# The same warps over arrays (tests, primer)
+
+
+@jit
 def sample_uniform_hemisphere(u: np.ndarray) -> np.ndarray:
-    """Uniform directions on the hemisphere z >= 0. ``u (n, 2)`` -> ``(n, 3)``."""
-    z = u[:, 0]
-    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    phi = 2.0 * np.pi * u[:, 1]
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-
-
-def pdf_uniform_hemisphere(w: np.ndarray) -> np.ndarray:
-    """Solid-angle pdf of :func:`sample_uniform_hemisphere`: 1/(2 pi) where z > 0."""
-    return np.where(w[:, 2] > 0.0, INV_2PI, 0.0)
-
-
-def sample_cosine_hemisphere(u: np.ndarray) -> np.ndarray:
-    """Cosine-weighted directions on z >= 0 (Malley's method: a uniform point on the unit disk,
-    by the polar map r = sqrt(u0), lifted to the hemisphere). ``(n, 2)`` -> ``(n, 3)``."""
-    r = np.sqrt(u[:, 0])
-    phi = 2.0 * np.pi * u[:, 1]
+    """``u (n, 2)`` -> uniform directions ``(n, 3)``."""
     out = np.empty((len(u), 3))
-    out[:, 0] = r * np.cos(phi)
-    out[:, 1] = r * np.sin(phi)
-    out[:, 2] = np.sqrt(np.maximum(0.0, 1.0 - u[:, 0]))
+    for i in range(len(u)):
+        out[i, 0], out[i, 1], out[i, 2] = uniform_hemisphere(u[i, 0], u[i, 1])
     return out
 
 
+@jit
+def pdf_uniform_hemisphere(w: np.ndarray) -> np.ndarray:
+    """``w (n, 3)`` -> ``(n,)`` pdf of :func:`sample_uniform_hemisphere`."""
+    out = np.empty(len(w))
+    for i in range(len(w)):
+        out[i] = uniform_hemisphere_pdf(w[i, 2])
+    return out
+
+
+@jit
+def sample_cosine_hemisphere(u: np.ndarray) -> np.ndarray:
+    """``u (n, 2)`` -> cosine-weighted directions ``(n, 3)``."""
+    out = np.empty((len(u), 3))
+    for i in range(len(u)):
+        out[i, 0], out[i, 1], out[i, 2] = cosine_hemisphere(u[i, 0], u[i, 1])
+    return out
+
+
+@jit
 def pdf_cosine_hemisphere(w: np.ndarray) -> np.ndarray:
-    """Solid-angle pdf of :func:`sample_cosine_hemisphere`: cos(theta)/pi where z > 0."""
-    return np.maximum(w[:, 2], 0.0) * INV_PI
+    """``w (n, 3)`` -> ``(n,)`` pdf of :func:`sample_cosine_hemisphere`."""
+    out = np.empty(len(w))
+    for i in range(len(w)):
+        out[i] = cosine_hemisphere_pdf(w[i, 2])
+    return out
 
 
+@jit
 def sample_triangle_barycentric(u: np.ndarray) -> np.ndarray:
-    """Uniform barycentrics ``(b1, b2)`` on a triangle, ``(n, 2)``; the point is
-    ``v0 + b1 (v1 - v0) + b2 (v2 - v0)``. Uses Heitz's 2019 low-distortion square-to-triangle
-    map, so nearby ``u`` give nearby points (area pdf = 1 / area)."""
-    u0 = u[:, 0]
-    u1 = u[:, 1]
-    lower = u1 > u0
-    # Offset the smaller coordinate: fold the square's two halves onto the triangle.
-    half = np.where(lower, u0, u1) * 0.5
-    b1 = np.where(lower, u0 * 0.5, u0 - half)
-    b2 = np.where(lower, u1 - half, u1 * 0.5)
-    return np.stack([b1, b2], axis=1)
+    """``u (n, 2)`` -> uniform barycentrics ``(n, 2)`` (area pdf = 1 / area)."""
+    out = np.empty((len(u), 2))
+    for i in range(len(u)):
+        out[i, 0], out[i, 1] = triangle_barycentric(u[i, 0], u[i, 1])
+    return out
 
 
-def _ggx_lambda_tan2(alpha: np.ndarray, cos2: np.ndarray) -> np.ndarray:
-    """Smith's Lambda for GGX from cos^2(theta): (sqrt(1 + alpha^2 tan^2) - 1) / 2."""
-    tan2 = np.maximum(1.0 - cos2, 0.0) / np.maximum(cos2, 1e-300)
-    return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
-
-
-def ggx_g1(w: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """Smith masking G1(w) for GGX, ``w (n, 3)`` local, ``alpha (n,)``; 0 where w.z <= 0."""
-    cos = w[:, 2]
-    g1 = 1.0 / (1.0 + _ggx_lambda_tan2(alpha, cos * cos))
-    return np.where(cos > 0.0, g1, 0.0)
-
-
-def ggx_d(h: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """GGX (Trowbridge-Reitz) normal distribution D(h), ``h (n, 3)`` local unit half vectors.
-
-    D = alpha^2 / (pi (cos^2 (alpha^2 - 1) + 1)^2), normalized so that the integral of
-    D(h) cos(theta_h) over the hemisphere is 1 (Walter et al. 2007, eq. 33).
-    """
-    cos2 = h[:, 2] * h[:, 2]
-    a2 = alpha * alpha
-    denom = cos2 * (a2 - 1.0) + 1.0
-    return np.where(h[:, 2] > 0.0, a2 / (np.pi * denom * denom), 0.0)
-
-
+@jit
 def sample_ggx_visible_normal(u: np.ndarray, wo: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """Half vectors h distributed as the GGX normals visible from ``wo`` (Heitz 2018, JCGT 7(4)).
-
-    ``wo (n, 3)`` local with wo.z > 0, ``alpha (n,)``. Returns ``(n, 3)`` unit h with density
-    D_wo(h) = G1(wo) max(0, wo.h) D(h) / wo.z with respect to solid angle of h.
-    """
-    # Stretch wo to the configuration where the microsurface is a unit hemisphere.
-    vh = np.stack([alpha * wo[:, 0], alpha * wo[:, 1], wo[:, 2]], axis=1)
-    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
-    # Orthonormal basis (vh, t1, t2); t1 is perpendicular to vh in the xy-plane.
-    len2 = vh[:, 0] ** 2 + vh[:, 1] ** 2
-    inv_len = np.where(len2 > 0.0, 1.0 / np.sqrt(np.maximum(len2, 1e-300)), 0.0)
-    t1 = np.stack(
-        [np.where(len2 > 0.0, -vh[:, 1] * inv_len, 1.0), np.where(len2 > 0.0, vh[:, 0] * inv_len, 0.0),
-         np.zeros_like(len2)],
-        axis=1,
-    )
-    t2 = np.cross(vh, t1)
-    # Uniform point on the disk, then squash its upper half into the projected visible area.
-    r = np.sqrt(u[:, 0])
-    phi = 2.0 * np.pi * u[:, 1]
-    p1 = r * np.cos(phi)
-    p2 = r * np.sin(phi)
-    s = 0.5 * (1.0 + vh[:, 2])
-    p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * p2
-    p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
-    nh = p1[:, None] * t1 + p2[:, None] * t2 + p3[:, None] * vh
-    # Unstretch back to the ellipsoid configuration.
-    h = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 0.0)], axis=1)
-    return h / np.linalg.norm(h, axis=1, keepdims=True)
+    """``u (n, 2)``, local ``wo (n, 3)`` with wo.z > 0, ``alpha (n,)`` -> unit h ``(n, 3)``."""
+    out = np.empty((len(u), 3))
+    for i in range(len(u)):
+        out[i, 0], out[i, 1], out[i, 2] = ggx_visible_normal(
+            (wo[i, 0], wo[i, 1], wo[i, 2]), alpha[i], u[i, 0], u[i, 1])
+    return out
 
 
+@jit
 def pdf_ggx_visible_normal(h: np.ndarray, wo: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """Solid-angle density of h under :func:`sample_ggx_visible_normal`."""
-    cos_o = wo[:, 2]
-    dot = np.maximum(np.sum(wo * h, axis=1), 0.0)
-    safe_cos = np.where(cos_o > 0.0, cos_o, 1.0)
-    return np.where(cos_o > 0.0, ggx_g1(wo, alpha) * dot * ggx_d(h, alpha) / safe_cos, 0.0)
+    """``(n,)`` density of half vectors ``h (n, 3)`` under :func:`sample_ggx_visible_normal`."""
+    out = np.empty(len(h))
+    for i in range(len(h)):
+        out[i] = ggx_visible_normal_pdf((h[i, 0], h[i, 1], h[i, 2]), (wo[i, 0], wo[i, 1], wo[i, 2]),
+                                        alpha[i])
+    return out
+
+
+def ggx_d_array(h: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """``(n,)`` D(h) of unit half vectors ``h (n, 3)``, ``alpha (n,)``."""
+    return _scalar_of_cos(0, h, alpha)
+
+
+def ggx_g1_array(w: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """``(n,)`` G1(w) of unit directions ``w (n, 3)``, ``alpha (n,)``."""
+    return _scalar_of_cos(1, w, alpha)
+
+
+@jit
+def _scalar_of_cos(which: int, w: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    out = np.empty(len(w))
+    for i in range(len(w)):
+        out[i] = ggx_d(w[i, 2], alpha[i]) if which == 0 else ggx_g1(w[i, 2], alpha[i])
+    return out
 
 
 def reflect(w: np.ndarray, n: np.ndarray) -> np.ndarray:
