@@ -49,7 +49,7 @@ import numpy as np
 
 from . import bsdf, lights, mis, rand, warp
 from .embree import RayCaster
-from .frame import add_scaled, basis, normalized, scale, sub, to_local, to_world
+from .frame import add_scaled, basis, dot, normalized, scale, sub, to_local, to_world
 from .jit import jit
 from .lights import LightSampler, LightTables
 from .scene import STRATEGIES, Scene
@@ -167,15 +167,15 @@ class DirectLighting:
         plan = self.plan
         shadow = RayBuffer.empty(n if plan.one_sample else n * plan.n_light)
         direction = RayBuffer.empty(n if plan.one_sample else n * plan.n_dir)
-        hits = self.caster.intersect(origins, dirs)
+        prim = self.caster.first_hit(origins, dirs)
         radiance = np.empty((n, 3))
         tables = self.lights.tables
-        n_shadow, n_direction = _shade(hits.prim, hits.u, hits.v, dirs, key, self.surfaces, tables, plan,
+        n_shadow, n_direction = _shade(prim, origins, dirs, key, self.surfaces, tables, plan,
                                        radiance, shadow, direction)
         s, d = slice(0, n_shadow), slice(0, n_direction)
         blocked = self.caster.occluded(shadow.origin[s], shadow.dir[s], shadow.tmax[s])
-        found = self.caster.intersect(direction.origin[d], direction.dir[d])
-        _gather(radiance, self.surfaces, tables, plan, shadow, blocked, direction, found.prim, found.t)
+        found = self.caster.first_hit(direction.origin[d], direction.dir[d])
+        _gather(radiance, self.surfaces, tables, plan, shadow, blocked, direction, found)
         return radiance
 
 
@@ -207,13 +207,21 @@ class RayBuffer(NamedTuple):
 
 # -------------------------------------------------------------------------------------------------
 # Compiled kernels
+#
+# The kernels unpack their named tuples once, before the loop over lanes: reading an array out
+# of a tuple inside the loop costs a reference-count update (~25 ns) each time.
 
 
 @jit
-def _shade(prim, hit_u, hit_v, dirs, key, surfaces: Surfaces, light_tables: LightTables, plan: Plan,
+def _shade(prim, origins, dirs, key, surfaces: Surfaces, light_tables: LightTables, plan: Plan,
            radiance, shadow: RayBuffer, direction: RayBuffer):
     """Camera hits -> emission seen directly into ``radiance (n, 3)``, and the shadow and
     direction rays of every shading point into the buffers. Returns their counts."""
+    hit_table, kinds, reflectances, alphas, eps = surfaces
+    alias_prob, alias, pmf, area, point_lights, _ = light_tables
+    shadow_origin, shadow_dir, shadow_tmax, shadow_value, _, shadow_lane, _ = shadow
+    dir_origin, dir_dir, _, dir_value, dir_pdf, dir_lane, dir_delta = direction
+    n_light, n_dir = float(plan.n_light), float(plan.n_dir)
     n_shadow = 0
     n_direction = 0
     for lane in range(len(prim)):
@@ -221,106 +229,109 @@ def _shade(prim, hit_u, hit_v, dirs, key, surfaces: Surfaces, light_tables: Ligh
         p = prim[lane]
         if p < 0:
             continue
-        g = surfaces.hit_table[p]
         d = (float(dirs[lane, 0]), float(dirs[lane, 1]), float(dirs[lane, 2]))
-        cos_view = -(g[9] * d[0] + g[10] * d[1] + g[11] * d[2])
+        face_normal = (hit_table[p, 9], hit_table[p, 10], hit_table[p, 11])
+        cos_view = -dot(face_normal, d)
         # Emitters seen directly (weight 1 in every strategy): front side only.
         if cos_view > 0.0:
-            radiance[lane, 0], radiance[lane, 1], radiance[lane, 2] = g[12], g[13], g[14]
-        material = int(g[15])
-        kind = surfaces.kind[material]
+            for c in range(3):
+                radiance[lane, c] = hit_table[p, 12 + c]
+        material = int(hit_table[p, 15])
+        kind = kinds[material]
         if kind == bsdf.NONE or cos_view == 0.0:
             continue
-        # The shading point: frame around the face normal flipped toward the viewer.
-        u, v = float(hit_u[lane]), float(hit_v[lane])
-        x = (g[0] + u * g[3] + v * g[6], g[1] + u * g[4] + v * g[7], g[2] + u * g[5] + v * g[8])
-        sign = 1.0 if cos_view > 0.0 else -1.0
-        normal = (sign * g[9], sign * g[10], sign * g[11])
+        # The shading point, where the ray meets the triangle's plane (float64; Embree's own
+        # distance is float32), and a frame around the face normal flipped toward the viewer.
+        o = (float(origins[lane, 0]), float(origins[lane, 1]), float(origins[lane, 2]))
+        x = add_scaled(o, _plane_distance(hit_table, p, o, -cos_view), d)
+        normal = scale(1.0 if cos_view > 0.0 else -1.0, face_normal)
         s, t = basis(normal)
         wo = to_local(s, t, normal, scale(-1.0, d))
-        origin = add_scaled(x, surfaces.eps, normal)
-        point = (x, origin, s, t, normal, wo, kind, surfaces.reflectance[material], surfaces.alpha[material],
-                 surfaces.eps)
+        origin = add_scaled(x, eps, normal)
+        reflectance = (reflectances[material, 0], reflectances[material, 1], reflectances[material, 2])
+        alpha = alphas[material]
         stream = rand.lane_stream(key, lane)
-        n_light, n_dir = float(plan.n_light), float(plan.n_dir)
+
+        # Which samples this point takes: (light samples, direction samples, their counts).
         if plan.one_sample:
-            if rand.uniform(stream, 0) < plan.c_light:
-                n_shadow = _light_sample(point, lane, stream, 1, plan.c_light, 1.0 - plan.c_light,
-                                         light_tables, plan, shadow, n_shadow)
-            else:
-                n_direction = _direction_sample(point, lane, stream, 1 + 3 * plan.n_light, 1.0 - plan.c_light,
-                                                plan, direction, n_direction)
-            continue
-        for j in range(plan.n_light):
-            n_shadow = _light_sample(point, lane, stream, 1 + 3 * j, n_light, n_dir, light_tables, plan,
-                                     shadow, n_shadow)
-        for j in range(plan.n_dir):
-            n_direction = _direction_sample(point, lane, stream, 1 + 3 * plan.n_light + 2 * j, n_dir,
-                                            plan, direction, n_direction)
+            take_light = rand.uniform(stream, 0) < plan.c_light
+            lights_here, dirs_here = (1, 0) if take_light else (0, 1)
+            own_light, own_dir = plan.c_light, 1.0 - plan.c_light
+        else:
+            lights_here, dirs_here = plan.n_light, plan.n_dir
+            own_light, own_dir = n_light, n_dir
+
+        for j in range(lights_here):
+            dim = 1 + 3 * j
+            wi_world, dist, le, pdf_light, delta = lights.sample(
+                alias_prob, alias, pmf, area, point_lights, rand.uniform(stream, dim),
+                rand.uniform(stream, dim + 1), rand.uniform(stream, dim + 2), x)
+            if not pdf_light > 0.0:
+                continue
+            wi = to_local(s, t, normal, wi_world)
+            # f Le |cos| w_l / (own p_l); other = 0 (no direction technique) gives weight 1.
+            c = bsdf.shape(kind, alpha, wo, wi) * max(wi[2], 0.0) / (own_light * pdf_light)
+            if own_dir > 0.0 and plan.sampler != NO_SAMPLER and not delta:
+                pdf_dir = _direction_pdf(plan.sampler, kind, alpha, wo, wi)
+                c *= mis.weight_of(plan.heuristic, own_light * pdf_light, own_dir * pdf_dir)
+            value = (reflectance[0] * le[0] * c, reflectance[1] * le[1] * c, reflectance[2] * le[2] * c)
+            if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
+                continue
+            # The shadow ray runs from the offset origin to the sampled point, stopping short of it.
+            to_target, length = normalized(sub(add_scaled(x, dist, wi_world), origin))
+            shadow_tmax[n_shadow] = max(length - eps, 0.0)
+            n_shadow = _put(shadow_origin, shadow_dir, shadow_value, shadow_lane, n_shadow,
+                            origin, to_target, value, lane)
+
+        for j in range(dirs_here):
+            dim = 1 + 3 * plan.n_light + 2 * j
+            u0, u1 = rand.uniform(stream, dim), rand.uniform(stream, dim + 1)
+            wi, weight, pdf_dir, delta = _direction_sample(plan.sampler, kind, alpha, wo, u0, u1)
+            # f |cos| / (own p_d); _gather multiplies in the emitter it hits and the MIS weight.
+            c = weight / own_dir
+            value = (reflectance[0] * c, reflectance[1] * c, reflectance[2] * c)
+            if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
+                continue
+            dir_pdf[n_direction] = own_dir * pdf_dir
+            dir_delta[n_direction] = delta
+            n_direction = _put(dir_origin, dir_dir, dir_value, dir_lane, n_direction,
+                               origin, to_world(s, t, normal, wi), value, lane)
     return n_shadow, n_direction
 
 
 @jit
-def _light_sample(point, lane, stream, dim, own, other, light_tables, plan, out, row):
-    """One light sample at ``point``: f Le |cos| w_l / (own p_l) into ``out[row]`` with its shadow
-    ray, if it can contribute. ``own`` scales this technique's pdf (its sample count, or its
-    selection probability in one-sample MIS), ``other`` the direction technique's; other = 0
-    gives weight 1. Returns the next free row."""
-    x, origin, s, t, normal, wo, kind, reflectance, alpha, eps = point
-    u_select, u0, u1 = rand.uniform(stream, dim), rand.uniform(stream, dim + 1), rand.uniform(stream, dim + 2)
-    wi_world, dist, le, pdf_light, delta = lights.sample(light_tables, u_select, u0, u1, x)
-    if not pdf_light > 0.0:
-        return row
-    wi = to_local(s, t, normal, wi_world)
-    c = bsdf.shape(kind, alpha, wo, wi) * max(wi[2], 0.0) / (own * pdf_light)
-    if other > 0.0 and plan.sampler != NO_SAMPLER and not delta:
-        pdf_dir = _direction_pdf(plan.sampler, kind, alpha, wo, wi)
-        c *= mis.weight_of(plan.heuristic, own * pdf_light, other * pdf_dir)
-    value = (reflectance[0] * le[0] * c, reflectance[1] * le[1] * c, reflectance[2] * le[2] * c)
-    if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
-        return row
-    # The shadow ray runs from the offset origin to the sampled point and stops short of it.
-    to_target, length = normalized(sub(add_scaled(x, dist, wi_world), origin))
-    out.tmax[row] = max(length - eps, 0.0)
-    _write_ray(out, row, origin, to_target, value, lane)
+def _plane_distance(hit_table, p, o, cos_normal) -> float:
+    """Distance from ``o`` along a unit direction d to the plane of triangle ``p``, given
+    cos_normal = d . face normal (nonzero): (v0 - o) . n / (d . n)."""
+    return ((hit_table[p, 0] - o[0]) * hit_table[p, 9] + (hit_table[p, 1] - o[1]) * hit_table[p, 10]
+            + (hit_table[p, 2] - o[2]) * hit_table[p, 11]) / cos_normal
+
+
+@jit
+def _put(origins, dirs, values, lanes, row, origin, direction, value, lane) -> int:
+    """Write one ray and what it carries into row ``row``; returns the next free row."""
+    for c in range(3):
+        origins[row, c] = origin[c]
+        dirs[row, c] = direction[c]
+        values[row, c] = value[c]
+    lanes[row] = lane
     return row + 1
 
 
 @jit
-def _direction_sample(point, lane, stream, dim, own, plan, out, row):
-    """One direction sample at ``point``: f |cos| / (own p_d) into ``out[row]`` with its ray and
-    count-scaled pdf; ``_gather`` multiplies in the emitter it hits and the MIS weight.
-    Returns the next free row."""
-    x, origin, s, t, normal, wo, kind, reflectance, alpha, eps = point
-    u0, u1 = rand.uniform(stream, dim), rand.uniform(stream, dim + 1)
-    delta = False
-    if plan.sampler == BSDF:
-        wi, weight, pdf_dir, delta = bsdf.sample(kind, alpha, wo, u0, u1)
+def _direction_sample(sampler, kind, alpha, wo, u0, u1):
+    """One direction from the strategy's sampler: ``(wi, weight, pdf, delta)`` with weight =
+    f |cos| / pdf (the reflectance left out), as ``bsdf.sample`` returns it."""
+    if sampler == BSDF:
+        return bsdf.sample(kind, alpha, wo, u0, u1)
+    if sampler == UNIFORM:
+        wi = warp.uniform_hemisphere(u0, u1)
+        pdf_dir = warp.uniform_hemisphere_pdf(wi[2])
     else:
-        if plan.sampler == UNIFORM:
-            wi = warp.uniform_hemisphere(u0, u1)
-            pdf_dir = warp.uniform_hemisphere_pdf(wi[2])
-        else:
-            wi = warp.cosine_hemisphere(u0, u1)
-            pdf_dir = warp.cosine_hemisphere_pdf(wi[2])
-        weight = bsdf.shape(kind, alpha, wo, wi) * max(wi[2], 0.0) / pdf_dir if pdf_dir > 0.0 else 0.0
-    c = weight / own
-    value = (reflectance[0] * c, reflectance[1] * c, reflectance[2] * c)
-    if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
-        return row
-    out.pdf[row] = own * pdf_dir
-    out.delta[row] = delta
-    _write_ray(out, row, origin, to_world(s, t, normal, wi), value, lane)
-    return row + 1
-
-
-@jit
-def _write_ray(out, row, origin, direction, value, lane):
-    for k in range(3):
-        out.origin[row, k] = origin[k]
-        out.dir[row, k] = direction[k]
-        out.value[row, k] = value[k]
-    out.lane[row] = lane
+        wi = warp.cosine_hemisphere(u0, u1)
+        pdf_dir = warp.cosine_hemisphere_pdf(wi[2])
+    weight = bsdf.shape(kind, alpha, wo, wi) * max(wi[2], 0.0) / pdf_dir if pdf_dir > 0.0 else 0.0
+    return wi, weight, pdf_dir, False
 
 
 @jit
@@ -335,27 +346,32 @@ def _direction_pdf(sampler, kind, alpha, wo, wi):
 
 @jit
 def _gather(radiance, surfaces: Surfaces, light_tables: LightTables, plan: Plan, shadow: RayBuffer, blocked,
-            direction: RayBuffer, prim, dist):
+            direction: RayBuffer, prim):
     """Add to ``radiance`` the light samples whose shadow rays are unblocked, and the direction
     samples whose rays hit the front of an emitter, weighted against the light technique."""
+    hit_table = surfaces.hit_table
+    by_triangle = light_tables.by_triangle
+    shadow_value, shadow_lane = shadow.value, shadow.lane
     for row in range(len(blocked)):
         if not blocked[row]:
-            lane = shadow.lane[row]
-            for k in range(3):
-                radiance[lane, k] += shadow.value[row, k]
+            lane = shadow_lane[row]
+            for c in range(3):
+                radiance[lane, c] += shadow_value[row, c]
     other = plan.c_light if plan.one_sample else float(plan.n_light)
+    origins, dirs, _, values, pdfs, lanes, deltas = direction
     for row in range(len(prim)):
         p = prim[row]
         if p < 0:
             continue
-        g = surfaces.hit_table[p]
-        wi = (float(direction.dir[row, 0]), float(direction.dir[row, 1]), float(direction.dir[row, 2]))
-        if not g[9] * wi[0] + g[10] * wi[1] + g[11] * wi[2] < 0.0:  # emitters shine from the front
-            continue
+        wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
+        cos_normal = hit_table[p, 9] * wi[0] + hit_table[p, 10] * wi[1] + hit_table[p, 11] * wi[2]
+        if not cos_normal < 0.0:
+            continue  # emitters shine from the front only
         w = 1.0
-        if other > 0.0 and not direction.delta[row]:
-            w = mis.weight_of(plan.heuristic, direction.pdf[row],
-                              other * lights.pdf(light_tables, p, wi, float(dist[row])))
-        lane = direction.lane[row]
-        for k in range(3):
-            radiance[lane, k] += direction.value[row, k] * g[12 + k] * w
+        if other > 0.0 and not deltas[row]:
+            o = (float(origins[row, 0]), float(origins[row, 1]), float(origins[row, 2]))
+            pdf_light = lights.pdf(by_triangle, p, wi, _plane_distance(hit_table, p, o, cos_normal))
+            w = mis.weight_of(plan.heuristic, pdfs[row], other * pdf_light)
+        lane = lanes[row]
+        for c in range(3):
+            radiance[lane, c] += values[row, c] * hit_table[p, 12 + c] * w

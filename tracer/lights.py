@@ -95,20 +95,26 @@ class LightTables(NamedTuple):
     by_triangle: np.ndarray
 
 
+# The per-lane functions take the table arrays one by one: in compiled code, reading an array
+# out of a tuple inside a loop costs a reference-count update (~25 ns), so kernels unpack
+# ``LightTables`` once, before their loops.
+
+
 @jit
-def pick(tables: LightTables, u_select: float) -> int:
+def pick(alias_prob, alias, u_select: float) -> int:
     """A candidate index distributed by ``pmf``, by Walker's alias method: the integer part of
     u K picks a column, the fraction decides between the column and its alias. O(1) per
     sample, unlike a binary search of the CDF."""
-    count = len(tables.alias)
+    count = len(alias)
     scaled = u_select * count
     column = min(int(scaled), count - 1)
-    return column if scaled - column < tables.alias_prob[column] else tables.alias[column]
+    return column if scaled - column < alias_prob[column] else alias[column]
 
 
 @jit
-def sample(tables: LightTables, u_select: float, u0: float, u1: float, x):
-    """Sample a light for shading point ``x`` (world). Returns ``(wi, dist, le, pdf, delta)``:
+def sample(alias_prob, alias, pmf, area, point, u_select: float, u0: float, u1: float, x):
+    """Sample a light for shading point ``x`` (world), from the arrays of ``LightTables``.
+    Returns ``(wi, dist, le, pdf, delta)``:
 
     wi : world unit direction from x toward the light.   dist : distance to the sampled point.
     le : RGB radiance arriving along wi (area), or I / d^2 (point); the contribution is
@@ -118,43 +124,43 @@ def sample(tables: LightTables, u_select: float, u0: float, u1: float, x):
     delta : a point light (no other technique can produce this sample).
     """
     zero = (0.0, 0.0, 0.0)
-    if len(tables.alias) == 0:
+    if len(alias) == 0:
         return (0.0, 0.0, 1.0), 0.0, zero, 0.0, False
-    k = pick(tables, u_select)
-    n_tri = len(tables.area)
+    k = pick(alias_prob, alias, u_select)
+    n_tri = len(area)
     if k < n_tri:
-        g = tables.area[k]
         b1, b2 = warp.triangle_barycentric(u0, u1)
-        lx = g[0] + b1 * g[3] + b2 * g[6] - x[0]
-        ly = g[1] + b1 * g[4] + b2 * g[7] - x[1]
-        lz = g[2] + b1 * g[5] + b2 * g[8] - x[2]
+        lx = area[k, 0] + b1 * area[k, 3] + b2 * area[k, 6] - x[0]
+        ly = area[k, 1] + b1 * area[k, 4] + b2 * area[k, 7] - x[1]
+        lz = area[k, 2] + b1 * area[k, 5] + b2 * area[k, 8] - x[2]
         d2 = lx * lx + ly * ly + lz * lz
         d = math.sqrt(d2)
         if d <= 0.0:
             return (0.0, 0.0, 1.0), 0.0, zero, 0.0, False
         wi = (lx / d, ly / d, lz / d)
-        cos_light = -(g[9] * wi[0] + g[10] * wi[1] + g[11] * wi[2])
+        cos_light = -(area[k, 9] * wi[0] + area[k, 10] * wi[1] + area[k, 11] * wi[2])
         if cos_light <= 0.0:  # front side only
             return wi, d, zero, 0.0, False
-        return wi, d, (g[12], g[13], g[14]), g[15] * d2 / cos_light, False
-    p = tables.point[k - n_tri]
-    lx, ly, lz = p[0] - x[0], p[1] - x[1], p[2] - x[2]
+        return wi, d, (area[k, 12], area[k, 13], area[k, 14]), area[k, 15] * d2 / cos_light, False
+    q = k - n_tri
+    lx, ly, lz = point[q, 0] - x[0], point[q, 1] - x[1], point[q, 2] - x[2]
     d2 = lx * lx + ly * ly + lz * lz
     d = math.sqrt(d2)
     if d <= 0.0:
         return (0.0, 0.0, 1.0), 0.0, zero, 0.0, True
-    return (lx / d, ly / d, lz / d), d, (p[3] / d2, p[4] / d2, p[5] / d2), tables.pmf[k], True
+    intensity = (point[q, 3] / d2, point[q, 4] / d2, point[q, 5] / d2)
+    return (lx / d, ly / d, lz / d), d, intensity, pmf[k], True
 
 
 @jit
-def pdf(tables: LightTables, prim: int, wi, dist: float) -> float:
+def pdf(by_triangle, prim: int, wi, dist: float) -> float:
     """Solid-angle pdf with which :func:`sample` picks direction ``wi`` (world) that hits
     triangle ``prim`` at distance ``dist``; 0 for non-emitters and back sides."""
-    g = tables.by_triangle[prim]
-    cos_light = -(g[0] * wi[0] + g[1] * wi[1] + g[2] * wi[2])
-    if g[3] <= 0.0 or cos_light <= 0.0:
+    cos_light = -(by_triangle[prim, 0] * wi[0] + by_triangle[prim, 1] * wi[1] + by_triangle[prim, 2] * wi[2])
+    pmf_over_area = by_triangle[prim, 3]
+    if pmf_over_area <= 0.0 or cos_light <= 0.0:
         return 0.0
-    return g[3] * dist * dist / cos_light
+    return pmf_over_area * dist * dist / cos_light
 
 
 class LightSampler:
@@ -215,12 +221,14 @@ class LightSampler:
 
 @jit
 def _sample_lanes(tables, u_select, u_point, x):
+    alias_prob, alias, pmf, area, point, _ = tables
     n = len(u_select)
     wi, dist, le = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
     p, delta = np.empty(n), np.empty(n, dtype=np.bool_)
     for i in range(n):
-        w, dist[i], radiance, p[i], delta[i] = sample(tables, u_select[i], u_point[i, 0], u_point[i, 1],
-                                                      (x[i, 0], x[i, 1], x[i, 2]))
+        xi = (x[i, 0], x[i, 1], x[i, 2])
+        w, dist[i], radiance, p[i], delta[i] = sample(alias_prob, alias, pmf, area, point, u_select[i],
+                                                      u_point[i, 0], u_point[i, 1], xi)
         wi[i, 0], wi[i, 1], wi[i, 2] = w
         le[i, 0], le[i, 1], le[i, 2] = radiance
     return wi, dist, le, p, delta
@@ -228,7 +236,8 @@ def _sample_lanes(tables, u_select, u_point, x):
 
 @jit
 def _pdf_lanes(tables, prim, wi, dist):
+    by_triangle = tables.by_triangle
     out = np.empty(len(prim))
     for i in range(len(prim)):
-        out[i] = pdf(tables, prim[i], (wi[i, 0], wi[i, 1], wi[i, 2]), dist[i])
+        out[i] = pdf(by_triangle, prim[i], (wi[i, 0], wi[i, 1], wi[i, 2]), dist[i])
     return out

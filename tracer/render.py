@@ -26,6 +26,7 @@ from .film import Film
 from .scene import Scene
 
 DEFAULT_BATCH_LANES = 1 << 15
+SAMPLES_PER_PASS = 8
 
 
 @dataclass(frozen=True)
@@ -99,11 +100,13 @@ def plan_batches(width: int, height: int, spp: int, first_sample: int = 0,
                  batch_lanes: int = DEFAULT_BATCH_LANES) -> list[Batch]:
     """Cut ``width * height`` pixels x ``spp`` samples into batches, pass by pass.
 
-    A pass gives every pixel k more samples; with a small image k > 1 so that a batch still
-    has enough lanes to amortize the per-call cost of Embree and numpy.
+    A pass gives every pixel k more samples. k is at least ``SAMPLES_PER_PASS`` (or spp, if
+    fewer), so that the film folds k samples at once per pixel instead of streaming the whole
+    film through memory for every sample, and larger for small images so that a batch still
+    has enough lanes to amortize the per-call cost of Embree.
     """
     pixels = width * height
-    k = max(1, min(spp, batch_lanes // max(pixels, 1)))
+    k = max(1, min(spp, max(SAMPLES_PER_PASS, batch_lanes // max(pixels, 1))))
     chunk = max(1, min(pixels, batch_lanes // k))
     batches = []
     for s0 in range(0, spp, k):
