@@ -157,7 +157,7 @@ def _recording_classes():
         """Casts like RayCaster and keeps a float32 copy of every query, batch by batch.
 
         Each render thread fills its own batch (thread-local, in call order); a finished batch
-        joins the shared list under a lock. In a batch, the first intersect call is the
+        joins the shared list under a lock. In a batch, the first closest-hit call is the
         camera rays, later ones are BSDF (direction) rays, occluded calls are shadow rays.
         """
 
@@ -182,15 +182,19 @@ def _recording_classes():
                                    "changed, update benchmarks/bench.py")
             if len(origins) == 0:  # RayCaster does not call Embree for an empty query
                 return
-            if kind == "intersect":
+            if kind == "closest":
                 kind = "bsdf" if any(c.kind in ("camera", "bsdf") for c in calls) else "camera"
             # The same float32 conversion RayCaster makes, so Embree sees identical rays.
             calls.append(Call(kind, np.array(origins, dtype=np.float32), np.array(dirs, dtype=np.float32),
                               None if tmax is None else np.array(tmax, dtype=np.float32)))
 
+        def first_hit(self, origins, dirs):
+            self._record("closest", origins, dirs)
+            return super().first_hit(origins, dirs)
+
         def intersect(self, origins, dirs):
-            self._record("intersect", origins, dirs)
-            return super().intersect(origins, dirs)
+            raise RuntimeError("DirectLighting called RayCaster.intersect: tracer's render loop "
+                               "changed, update benchmarks/bench.py")
 
         def occluded(self, origins, dirs, tmax):
             self._record("shadow", origins, dirs, tmax)
@@ -213,8 +217,8 @@ def replay(embree_scene, batches: list[list[Call]], threads: int) -> tuple[float
     """Cast the recorded batches through embreex with ``threads`` threads, as render() would.
 
     Returns the wall time and, per ray kind, the thread-seconds spent inside embreex's run().
-    The queries are exactly RayCaster's: closest hit with ``output=1`` (tracer needs t, u, v
-    and the triangle), occlusion with a fresh ``dists`` array (embreex overwrites it).
+    The queries are exactly RayCaster's: closest hit returning the triangle ids only
+    (``first_hit``), occlusion with a fresh ``dists`` array (embreex overwrites it).
     """
     import numpy as np
 
@@ -226,7 +230,7 @@ def replay(embree_scene, batches: list[list[Call]], threads: int) -> tuple[float
         for call, tmax in zip(batches[index], dists[index], strict=True):
             start = time.perf_counter()
             if tmax is None:
-                embree_scene.run(call.origins, call.dirs, output=1)
+                embree_scene.run(call.origins, call.dirs)
             else:
                 embree_scene.run(call.origins, call.dirs, dists=tmax, query="OCCLUDED")
             spent[call.kind] += time.perf_counter() - start

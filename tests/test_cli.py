@@ -93,6 +93,8 @@ BAD_SCENES = {
     "wrong type": (_mutate("fov = 40.0", 'fov = "wide"'), {}, ["camera.fov", "a number"]),
     "negative emission": (_mutate("emission = [5.0, 5.0, 5.0]", "emission = [5.0, -1.0, 5.0]"), {},
                           ["shapes[1].emission", ">= 0"]),
+    "emission beyond float32": (_mutate("emission = [5.0, 5.0, 5.0]", "emission = [5.0, 1e39, 5.0]"), {},
+                                ["shapes[1].emission", "<= 3.4"]),
     "non-finite number": (_mutate("fov = 40.0", "fov = nan"), {}, ["camera.fov", "finite"]),
     "infinite vertex": (_mutate("origin = [-1.0, 0.0, -1.0]", "origin = [-1.0, inf, -1.0]"), {},
                         ["shapes[0].origin", "finite"]),

@@ -29,6 +29,7 @@ STRATEGIES = ("uniform", "cosine", "bsdf", "light", "mis")
 # statistics and the float32 output image; used to refuse resolutions that cannot fit.
 FILM_BYTES_PER_PIXEL = 8 + 6 * 8 + 6 * 8 + 6 * 4
 MAX_SIDE = 1 << 15
+FLOAT32_MAX = float(np.finfo(np.float32).max)  # the largest radiance a scene may give
 
 
 def default_scene_path() -> Path:
@@ -42,7 +43,8 @@ class Scene:
 
     vertices : (V, 3) float64 world positions.   faces : (F, 3) int32 vertex indices.
     material : (F,) int32 index into the material table (0 is the black material).
-    emission : (F, 3) float64 radiance leaving each triangle's front side (0: not emissive).
+    emission : (F, 3) float64 radiance leaving each triangle's front side (0: not emissive);
+        the scene file's values rounded to float32.
     light_of_triangle : (F,) int32, index of the area light (emissive shape) it belongs to, -1 if none.
     materials : ``Bsdf`` table with one row per material (row 0: black).
     point_position, point_intensity : (P, 3) float64; intensity in W/sr.
@@ -351,7 +353,10 @@ class _Geometry:
 
 def _read_shape(r: _Reader, material_names: list[str], geometry: _Geometry) -> None:
     shape_type = r.string("type", ("quad", "mesh", "sphere"))
-    emission = r.vec3("emission", default=[0.0, 0.0, 0.0], nonnegative=True)
+    # Radiance is kept at float32 precision, as the EXR output and the light sampler's table
+    # store it, so that every table holds the very same emission.
+    emission = r.vec3("emission", default=[0.0, 0.0, 0.0], nonnegative=True, hi=FLOAT32_MAX)
+    emission = emission.astype(np.float32).astype(np.float64)
     material = 0
     if r.has("material"):
         name = r.string("material")

@@ -103,33 +103,27 @@ def ggx_d_cos2(cos2_h: float, alpha: float) -> float:
 
 @jit
 def ggx_visible_normal(wo, alpha: float, u0: float, u1: float):
-    """A half vector h distributed as the GGX normals visible from local ``wo`` (wo.z > 0),
-    Heitz 2018, JCGT 7(4): density D_wo(h) = G1(wo) max(0, wo.h) D(h) / wo.z in solid angle."""
-    # Stretch wo to the configuration where the microsurface is a unit hemisphere.
+    """A half vector h distributed as the GGX normals visible from local ``wo`` (wo.z > 0):
+    density D_wo(h) = G1(wo) max(0, wo.h) D(h) / wo.z in solid angle (Heitz 2018, JCGT 7(4)).
+
+    Dupuy and Benyoub's spherical-cap form of Heitz's method (2023, "Sound and Fast Sampling of
+    Visible GGX Normals"): in the stretched configuration, where the microsurface is a unit
+    hemisphere, the visible normals are (a uniform point on the spherical cap z >= -v.z) + v,
+    normalized, with v the stretched wo; unstretching gives h. Same distribution as Heitz's
+    disk construction, with no basis to build.
+    """
+    # Stretch wo.
     vx, vy, vz = alpha * wo[0], alpha * wo[1], wo[2]
     inv = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
     vx, vy, vz = vx * inv, vy * inv, vz * inv
-    # Orthonormal basis (v, t1, t2); t1 is perpendicular to v in the xy-plane.
-    len2 = vx * vx + vy * vy
-    if len2 > 0.0:
-        inv_len = 1.0 / math.sqrt(len2)
-        t1x, t1y = -vy * inv_len, vx * inv_len
-    else:
-        t1x, t1y = 1.0, 0.0
-    t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x  # v x t1 with t1.z = 0
-    # Uniform point on the disk, then squash its upper half into the projected visible area.
-    r = math.sqrt(u0)
-    phi = 2.0 * math.pi * u1
-    p1 = r * math.cos(phi)
-    p2 = r * math.sin(phi)
-    s = 0.5 * (1.0 + vz)
-    p2 = (1.0 - s) * math.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
-    p3 = math.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
-    nx = p1 * t1x + p2 * t2x + p3 * vx
-    ny = p1 * t1y + p2 * t2y + p3 * vy
-    nz = p2 * t2z + p3 * vz
-    # Unstretch back to the ellipsoid configuration.
-    hx, hy, hz = alpha * nx, alpha * ny, max(nz, 0.0)
+    # Uniform point on the cap of the unit sphere above z = -vz.
+    phi = 2.0 * math.pi * u0
+    z = (1.0 - u1) * (1.0 + vz) - vz
+    sin_theta = math.sqrt(max(0.0, 1.0 - z * z))
+    # Visible normal in the stretched configuration, then unstretched and normalized.
+    hx = alpha * (sin_theta * math.cos(phi) + vx)
+    hy = alpha * (sin_theta * math.sin(phi) + vy)
+    hz = max(z + vz, 0.0)
     inv = 1.0 / math.sqrt(hx * hx + hy * hy + hz * hz)
     return (hx * inv, hy * inv, hz * inv)
 
