@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
+from . import rand
 from .jit import jit
 
 
@@ -29,6 +31,11 @@ class Camera:
         r = r / np.linalg.norm(r)
         return f, r, np.cross(r, f)
 
+    @functools.cached_property
+    def _screen(self) -> tuple:
+        """What the ray kernels need: width, height, tan(fov / 2), f, r, u."""
+        return (self.width, self.height, float(np.tan(np.radians(self.fov) * 0.5))) + self.basis
+
     def rays(self, pixel: np.ndarray, jitter: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Primary rays through film positions (pixel x + jitter x, pixel y + jitter y).
 
@@ -36,22 +43,46 @@ class Camera:
         jitter : (n, 2) in [0, 1)^2, the position inside the pixel (box filter).
         Returns origins (n, 3) and unit directions (n, 3), float64.
         """
-        f, r, u = self.basis
-        tan_half = float(np.tan(np.radians(self.fov) * 0.5))
-        d = _directions(np.asarray(pixel), np.asarray(jitter, dtype=np.float64), self.width, self.height,
-                        tan_half, f, r, u)
+        d = _directions(np.asarray(pixel), np.asarray(jitter, dtype=np.float64), *self._screen)
         return np.broadcast_to(self.origin, d.shape), d
+
+    def batch_rays(self, key: np.uint64, first_pixel: int, npix: int,
+                   k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The camera rays of a render batch: k samples for each of pixels first_pixel, ...,
+        npix of them, pixel by pixel; lane i's jitter is dimensions 0 and 1 of its stream
+        under ``key`` (``tracer.rand``). Returns origins and unit directions ``(npix k, 3)``,
+        float32 as Embree takes them."""
+        d = _batch_directions(key, first_pixel, npix, k, *self._screen)
+        return np.broadcast_to(self.origin.astype(np.float32), d.shape), d
+
+
+@jit
+def _direction(px: float, py: float, width, height, tan_half, f, r, u):
+    """Unit direction through film position (px, py) in pixels; screen x spans
+    [-aspect, aspect] tan_half, y spans [-1, 1] tan_half, row 0 at the top."""
+    sx = (2.0 * px / width - 1.0) * tan_half * (width / height)
+    sy = (1.0 - 2.0 * py / height) * tan_half
+    x, y, z = f[0] + sx * r[0] + sy * u[0], f[1] + sx * r[1] + sy * u[1], f[2] + sx * r[2] + sy * u[2]
+    inv = 1.0 / np.sqrt(x * x + y * y + z * z)
+    return x * inv, y * inv, z * inv
 
 
 @jit
 def _directions(pixel, jitter, width, height, tan_half, f, r, u) -> np.ndarray:
-    """Unit directions through film positions; screen x spans [-aspect, aspect] tan_half."""
     d = np.empty((len(pixel), 3))
-    aspect = width / height
     for i in range(len(pixel)):
-        sx = (2.0 * ((pixel[i] % width) + jitter[i, 0]) / width - 1.0) * tan_half * aspect
-        sy = (1.0 - 2.0 * ((pixel[i] // width) + jitter[i, 1]) / height) * tan_half
-        x, y, z = f[0] + sx * r[0] + sy * u[0], f[1] + sx * r[1] + sy * u[1], f[2] + sx * r[2] + sy * u[2]
-        inv = 1.0 / np.sqrt(x * x + y * y + z * z)
-        d[i, 0], d[i, 1], d[i, 2] = x * inv, y * inv, z * inv
+        px, py = (pixel[i] % width) + jitter[i, 0], (pixel[i] // width) + jitter[i, 1]
+        d[i, 0], d[i, 1], d[i, 2] = _direction(px, py, width, height, tan_half, f, r, u)
+    return d
+
+
+@jit
+def _batch_directions(key, first_pixel, npix, k, width, height, tan_half, f, r, u) -> np.ndarray:
+    d = np.empty((npix * k, 3), dtype=np.float32)
+    for i in range(npix * k):
+        pixel = first_pixel + i // k
+        stream = rand.lane_stream(key, i)
+        d[i, 0], d[i, 1], d[i, 2] = _direction((pixel % width) + rand.uniform(stream, 0),
+                                               (pixel // width) + rand.uniform(stream, 1),
+                                               width, height, tan_half, f, r, u)
     return d

@@ -218,7 +218,7 @@ def _shade(prim, origins, dirs, key, surfaces: Surfaces, light_tables: LightTabl
     """Camera hits -> emission seen directly into ``radiance (n, 3)``, and the shadow and
     direction rays of every shading point into the buffers. Returns their counts."""
     hit_table, kinds, reflectances, alphas, eps = surfaces
-    alias_prob, alias, pmf, area, point_lights, _ = light_tables
+    alias_prob, alias, pmf, area, point_lights, _, spheres = light_tables
     shadow_origin, shadow_dir, shadow_tmax, shadow_value, _, shadow_lane, _ = shadow
     dir_origin, dir_dir, _, dir_value, dir_pdf, dir_lane, dir_delta = direction
     n_light, n_dir = float(plan.n_light), float(plan.n_dir)
@@ -292,10 +292,13 @@ def _shade(prim, origins, dirs, key, surfaces: Surfaces, light_tables: LightTabl
             value = (reflectance[0] * c, reflectance[1] * c, reflectance[2] * c)
             if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
                 continue
+            wi_world = to_world(s, t, normal, wi)
+            if not lights.may_reach(spheres, origin, wi_world):
+                continue  # it could only contribute 0: no ray
             dir_pdf[n_direction] = own_dir * pdf_dir
             dir_delta[n_direction] = delta
             n_direction = _put(dir_origin, dir_dir, dir_value, dir_lane, n_direction,
-                               origin, to_world(s, t, normal, wi), value, lane)
+                               origin, wi_world, value, lane)
     return n_shadow, n_direction
 
 

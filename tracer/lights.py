@@ -85,6 +85,8 @@ class LightTables(NamedTuple):
     point : (P, 6) per point candidate: position (3), intensity (3).
     by_triangle : (F, 4) float32 per scene triangle: normal (3), selection pmf / area (1; 0 for
         non-emitters), for the pdf of a direction that hits it.
+    spheres : (S, 4) bounding spheres, center (3) and radius (1), that hold every emitting
+        triangle: a ray that meets none of them cannot reach an emitter (``may_reach``).
     """
 
     alias_prob: np.ndarray
@@ -93,6 +95,43 @@ class LightTables(NamedTuple):
     area: np.ndarray
     point: np.ndarray
     by_triangle: np.ndarray
+    spheres: np.ndarray
+
+
+MAX_SPHERES = 16  # more emitters than this share one bounding sphere (the test is per sphere)
+
+
+def emitter_spheres(scene: Scene) -> np.ndarray:
+    """``(S, 4)`` spheres (center, radius) around the emitting triangles, one per emissive shape,
+    or one around them all when there are more than ``MAX_SPHERES``. Radii are padded by the
+    scene's ray offset and 1e-6 relative, so that float32 rays that hit an emitter for Embree
+    always meet its sphere."""
+    emitting = np.flatnonzero((scene.emission.max(axis=1) > 0.0) & (scene.area > 0.0))
+    groups = [emitting[scene.light_of_triangle[emitting] == light]
+              for light in np.unique(scene.light_of_triangle[emitting])]
+    if len(groups) > MAX_SPHERES:
+        groups = [emitting]
+    spheres = np.zeros((len(groups), 4))
+    for row, tri in enumerate(groups):
+        corners = scene.vertices[scene.faces[tri]].reshape(-1, 3)
+        center = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
+        radius = np.sqrt(np.max(np.sum((corners - center) ** 2, axis=1)))
+        spheres[row, :3] = center
+        spheres[row, 3] = radius * (1.0 + 1e-6) + scene.ray_epsilon + 1e-6 * np.max(np.abs(center))
+    return spheres
+
+
+@jit
+def may_reach(spheres, o, w) -> bool:
+    """Whether the ray from ``o`` along unit ``w`` meets one of the emitter ``spheres`` (or starts
+    inside one): if not, it cannot hit an emitter, and a direction sample need not be cast."""
+    for i in range(len(spheres)):
+        cx, cy, cz, r = spheres[i, 0] - o[0], spheres[i, 1] - o[1], spheres[i, 2] - o[2], spheres[i, 3]
+        along = cx * w[0] + cy * w[1] + cz * w[2]
+        dist2 = cx * cx + cy * cy + cz * cz
+        if dist2 <= r * r or (along >= 0.0 and dist2 - along * along <= r * r):
+            return True
+    return False
 
 
 # The per-lane functions take the table arrays one by one: in compiled code, reading an array
@@ -216,6 +255,7 @@ class LightSampler:
             point=np.ascontiguousarray(np.concatenate(
                 [scene.point_position[points], scene.point_intensity[points]], axis=1).reshape(-1, 6)),
             by_triangle=by_triangle,
+            spheres=emitter_spheres(scene),
         )
 
     def sample(self, u_select: np.ndarray, u_point: np.ndarray, x: np.ndarray) -> LightSample:
@@ -230,7 +270,7 @@ class LightSampler:
 
 @jit
 def _sample_lanes(tables, u_select, u_point, x):
-    alias_prob, alias, pmf, area, point, _ = tables
+    alias_prob, alias, pmf, area, point, _, _ = tables
     n = len(u_select)
     wi, dist, le = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
     p, delta = np.empty(n), np.empty(n, dtype=np.bool_)

@@ -46,17 +46,6 @@ def uniform(stream: np.uint64, dim: int) -> float:
     return float(np.int64(z >> _S11)) * _TO_UNIT  # signed: one instruction, exact below 2^53
 
 
-@jit
-def uniform_block(key: np.uint64, lanes: int, dims: int) -> np.ndarray:
-    """``(lanes, dims)`` float64: dimensions 0 .. dims - 1 of every lane's stream."""
-    out = np.empty((lanes, dims))
-    for i in range(lanes):
-        stream = lane_stream(key, i)
-        for d in range(dims):
-            out[i, d] = uniform(stream, d)
-    return out
-
-
 def batch_key(rng: np.random.Generator) -> np.uint64:
     """A 64-bit key drawn from a batch's generator."""
     return np.uint64(rng.integers(0, 2**64, dtype=np.uint64))

@@ -23,6 +23,7 @@ import numpy as np
 from . import rand
 from .estimators import DirectLighting, Strategy
 from .film import Film
+from .jit import jit
 from .scene import Scene
 
 DEFAULT_BATCH_LANES = 1 << 15
@@ -120,16 +121,22 @@ def render_batch(estimator: DirectLighting, batch: Batch, seed: int) -> tuple[np
     """Render one batch: returns samples ``(npix, k, 3)`` and the count of non-finite ones."""
     rng = np.random.Generator(np.random.Philox(np.random.SeedSequence(
         [seed, batch.first_sample, batch.first_pixel])))
-    pixel = np.repeat(np.arange(batch.first_pixel, batch.first_pixel + batch.npix), batch.k)
-    jitter = rand.uniform_block(rand.batch_key(rng), batch.lanes, 2)
-    origins, dirs = estimator.scene.camera.rays(pixel, jitter)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        radiance = estimator.radiance(origins, dirs, rng)
-    bad = ~np.all(np.isfinite(radiance), axis=1)
-    nonfinite = int(np.count_nonzero(bad))
-    if nonfinite:
-        radiance[bad] = 0.0
+    camera = estimator.scene.camera
+    origins, dirs = camera.batch_rays(rand.batch_key(rng), batch.first_pixel, batch.npix, batch.k)
+    radiance = estimator.radiance(origins, dirs, rng)
+    nonfinite = _zero_nonfinite(radiance)
     return radiance.reshape(batch.npix, batch.k, 3), nonfinite
+
+
+@jit
+def _zero_nonfinite(radiance: np.ndarray) -> int:
+    """Set the rows of ``radiance (n, 3)`` that hold a NaN or an infinity to 0; returns how many."""
+    count = 0
+    for i in range(len(radiance)):
+        if not (np.isfinite(radiance[i, 0]) and np.isfinite(radiance[i, 1]) and np.isfinite(radiance[i, 2])):
+            radiance[i, 0] = radiance[i, 1] = radiance[i, 2] = 0.0
+            count += 1
+    return count
 
 
 def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Film | None = None,
