@@ -35,7 +35,9 @@ A batch runs as a wavefront of three ray casts and two compiled loops over its l
 techniques at every shading point and writes one shadow ray per light sample and one ray per
 direction sample, with what each would contribute; Embree casts both sets; ``_gather`` adds
 the unblocked light samples and the direction samples that hit an emitter, with their MIS
-weights. Random numbers are ``rand.uniform(key, lane, dimension)``: dimension 0 chooses the
+weights. Samples that can only contribute 0 cast no ray: a light sample with zero value, and a
+direction sample whose ray meets none of the emitters' bounding spheres (``lights.may_reach``).
+Random numbers are ``rand.uniform(key, lane, dimension)``: dimension 0 chooses the
 technique in one-sample MIS, light sample j uses 1 + 3j .. 3 + 3j, direction sample j uses
 the two after all light samples.
 """

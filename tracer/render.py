@@ -149,8 +149,11 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     cam = scene.camera
     film = film if film is not None else Film(cam.width, cam.height)
     estimator = estimator if estimator is not None else DirectLighting(scene, strategy)
-    batches = plan_batches(cam.width, cam.height, settings.spp, settings.first_sample,
-                           settings.batch_lanes)
+    # A batch casts at most 2 x batch_lanes rays from its shading points, whatever the sample
+    # counts, so that --light-samples 10000 shrinks the batches instead of exhausting memory.
+    per_lane = 1 if strategy.one_sample_mis else strategy.light_count + strategy.direction_count
+    lanes = max(1, settings.batch_lanes * 2 // max(2, per_lane))
+    batches = plan_batches(cam.width, cam.height, settings.spp, settings.first_sample, lanes)
     bar = _progress_bar(cam.width * cam.height * settings.spp, progress)
     nonfinite = 0
     samples = 0
