@@ -41,46 +41,42 @@ def _cos2_half(wo, wi) -> float:
 
 
 @jit
-def ggx_value(wo, wi, alpha: float) -> float:
-    """D(h) G1(wo) G1(wi) / (4 cos_o cos_i): the GGX microfacet BRDF with Fresnel = 1.
-    With G1 = 2 cos / (cos + sigma) (``warp.ggx_sigma``) the cosines cancel:
-    f = D(h) / ((cos_o + sigma_o) (cos_i + sigma_i))."""
+def ggx_value_and_pdf(wo, wi, alpha: float):
+    """The GGX microfacet BRDF with Fresnel = 1, f = D(h) G1(wo) G1(wi) / (4 cos_o cos_i), and the
+    pdf of sampling wi = reflect(wo, h) with h ~ visible normals, D_wo(h) / (4 wo.h) =
+    G1(wo) D(h) / (4 cos_o). With G1 = 2 cos / (cos + sigma) (``warp.ggx_sigma``) the cosines
+    cancel: f = D / ((cos_o + sigma_o) (cos_i + sigma_i)) and pdf = D / (2 (cos_o + sigma_o)).
+    Both are 0 unless wo and wi are above the surface (then wo.h > 0 holds)."""
     cos_o, cos_i = wo[2], wi[2]
     if cos_o <= 0.0 or cos_i <= 0.0:
-        return 0.0
-    return warp.ggx_d_cos2(_cos2_half(wo, wi), alpha) / (
-        (cos_o + warp.ggx_sigma(cos_o, alpha)) * (cos_i + warp.ggx_sigma(cos_i, alpha)))
+        return 0.0, 0.0
+    d = warp.ggx_d_cos2(_cos2_half(wo, wi), alpha)
+    outgoing = cos_o + warp.ggx_sigma(cos_o, alpha)
+    return d / (outgoing * (cos_i + warp.ggx_sigma(cos_i, alpha))), d / (2.0 * outgoing)
 
 
 @jit
-def ggx_pdf(wo, wi, alpha: float) -> float:
-    """pdf of wi = reflect(wo, h) with h ~ visible normals: D_wo(h) / (4 wo.h) =
-    G1(wo) D(h) / (4 cos_o) = D(h) / (2 (cos_o + sigma_o)), where wi.z > 0 and wo.h > 0
-    (wo.h > 0 is 1 + wo.wi > 0 for unit vectors)."""
-    cos_o = wo[2]
-    if wi[2] <= 0.0 or cos_o <= 0.0 or 1.0 + (wo[0] * wi[0] + wo[1] * wi[1] + wo[2] * wi[2]) <= 0.0:
-        return 0.0
-    return warp.ggx_d_cos2(_cos2_half(wo, wi), alpha) / (2.0 * (cos_o + warp.ggx_sigma(cos_o, alpha)))
+def shape_and_pdf(kind: int, alpha: float, wo, wi):
+    """``(shape, pdf)``: f(wo, wi) / reflectance without the cosine (0 below the surface and for
+    delta), and the solid-angle pdf with which :func:`sample` picks ``wi`` (0 for delta).
+    Together because MIS needs both and they share most of their work."""
+    if kind == DIFFUSE:
+        return (warp.INV_PI if wi[2] > 0.0 else 0.0), warp.cosine_hemisphere_pdf(wi[2])
+    if kind == ROUGH_CONDUCTOR:
+        return ggx_value_and_pdf(wo, wi, alpha)
+    return 0.0, 0.0
 
 
 @jit
 def shape(kind: int, alpha: float, wo, wi) -> float:
-    """f(wo, wi) / reflectance, without the cosine; 0 below the surface and for delta."""
-    if kind == DIFFUSE:
-        return warp.INV_PI if wi[2] > 0.0 else 0.0
-    if kind == ROUGH_CONDUCTOR:
-        return ggx_value(wo, wi, alpha)
-    return 0.0
+    """f(wo, wi) / reflectance, without the cosine (see :func:`shape_and_pdf`)."""
+    return shape_and_pdf(kind, alpha, wo, wi)[0]
 
 
 @jit
 def pdf(kind: int, alpha: float, wo, wi) -> float:
-    """Solid-angle pdf with which :func:`sample` picks ``wi``; 0 for delta."""
-    if kind == DIFFUSE:
-        return warp.cosine_hemisphere_pdf(wi[2])
-    if kind == ROUGH_CONDUCTOR:
-        return ggx_pdf(wo, wi, alpha)
-    return 0.0
+    """Solid-angle pdf with which :func:`sample` picks ``wi`` (see :func:`shape_and_pdf`)."""
+    return shape_and_pdf(kind, alpha, wo, wi)[1]
 
 
 @jit
@@ -94,11 +90,14 @@ def sample(kind: int, alpha: float, wo, u0: float, u1: float):
         return wi, (1.0 if p > 0.0 else 0.0), p, False
     if kind == ROUGH_CONDUCTOR:
         h = warp.ggx_visible_normal(wo, alpha, u0, u1)
-        d = 2.0 * (wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2])
-        wi = (d * h[0] - wo[0], d * h[1] - wo[1], d * h[2] - wo[2])
-        p = ggx_pdf(wo, wi, alpha)
-        # With separable Smith G and VNDF sampling, shape cos / pdf reduces to G1(wi).
-        return wi, (warp.ggx_g1(wi[2], alpha) if p > 0.0 else 0.0), p, False
+        wo_dot_h = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2]
+        wi = (2.0 * wo_dot_h * h[0] - wo[0], 2.0 * wo_dot_h * h[1] - wo[1], 2.0 * wo_dot_h * h[2] - wo[2])
+        if wi[2] <= 0.0 or wo_dot_h <= 0.0:
+            return wi, 0.0, 0.0, False
+        # The pdf of ggx_value_and_pdf, from h itself; with separable Smith G and visible-normal
+        # sampling, shape cos / pdf reduces to G1(wi).
+        p = warp.ggx_d_cos2(h[2] * h[2], alpha) / (2.0 * (wo[2] + warp.ggx_sigma(wo[2], alpha)))
+        return wi, warp.ggx_g1(wi[2], alpha), p, False
     if kind == MIRROR:
         return (-wo[0], -wo[1], wo[2]), 1.0, 0.0, True
     return (0.0, 0.0, 1.0), 0.0, 0.0, False

@@ -53,7 +53,14 @@ class Camera:
         under ``key`` (``tracer.rand``). Returns origins and unit directions ``(npix k, 3)``,
         float32 as Embree takes them."""
         d = _batch_directions(key, first_pixel, npix, k, *self._screen)
-        return np.broadcast_to(self.origin.astype(np.float32), d.shape), d
+        origins = self._origins
+        if len(origins) < len(d):  # grown once to the largest batch; Embree needs it contiguous
+            origins = self._origins = np.tile(self.origin.astype(np.float32), (len(d), 1))
+        return origins[: len(d)], d
+
+    @functools.cached_property
+    def _origins(self) -> np.ndarray:
+        return np.zeros((0, 3), dtype=np.float32)
 
 
 @jit

@@ -272,9 +272,10 @@ def _shade(prim, origins, dirs, key, surfaces: Surfaces, light_tables: LightTabl
                 continue
             wi = to_local(s, t, normal, wi_world)
             # f Le |cos| w_l / (own p_l); other = 0 (no direction technique) gives weight 1.
-            c = bsdf.shape(kind, alpha, wo, wi) * max(wi[2], 0.0) / (own_light * pdf_light)
+            f, pdf_bsdf = bsdf.shape_and_pdf(kind, alpha, wo, wi)
+            c = f * max(wi[2], 0.0) / (own_light * pdf_light)
             if own_dir > 0.0 and plan.sampler != NO_SAMPLER and not delta:
-                pdf_dir = _direction_pdf(plan.sampler, kind, alpha, wo, wi)
+                pdf_dir = pdf_bsdf if plan.sampler == BSDF else _hemisphere_pdf(plan.sampler, wi[2])
                 c *= mis.weight_of(plan.heuristic, own_light * pdf_light, own_dir * pdf_dir)
             value = (reflectance[0] * le[0] * c, reflectance[1] * le[1] * c, reflectance[2] * le[2] * c)
             if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
@@ -329,24 +330,18 @@ def _direction_sample(sampler, kind, alpha, wo, u0, u1):
     f |cos| / pdf (the reflectance left out), as ``bsdf.sample`` returns it."""
     if sampler == BSDF:
         return bsdf.sample(kind, alpha, wo, u0, u1)
-    if sampler == UNIFORM:
-        wi = warp.uniform_hemisphere(u0, u1)
-        pdf_dir = warp.uniform_hemisphere_pdf(wi[2])
-    else:
-        wi = warp.cosine_hemisphere(u0, u1)
-        pdf_dir = warp.cosine_hemisphere_pdf(wi[2])
+    wi = warp.uniform_hemisphere(u0, u1) if sampler == UNIFORM else warp.cosine_hemisphere(u0, u1)
+    pdf_dir = _hemisphere_pdf(sampler, wi[2])
     weight = bsdf.shape(kind, alpha, wo, wi) * max(wi[2], 0.0) / pdf_dir if pdf_dir > 0.0 else 0.0
     return wi, weight, pdf_dir, False
 
 
 @jit
-def _direction_pdf(sampler, kind, alpha, wo, wi):
-    """pdf of the direction technique for a light-sampled ``wi`` (for MIS weights)."""
+def _hemisphere_pdf(sampler, cos_i):
+    """pdf of the uniform or cosine hemisphere sampler at a direction with cos(theta) = cos_i."""
     if sampler == UNIFORM:
-        return warp.uniform_hemisphere_pdf(wi[2])
-    if sampler == COSINE:
-        return warp.cosine_hemisphere_pdf(wi[2])
-    return bsdf.pdf(kind, alpha, wo, wi)
+        return warp.uniform_hemisphere_pdf(cos_i)
+    return warp.cosine_hemisphere_pdf(cos_i)
 
 
 @jit
