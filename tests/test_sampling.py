@@ -585,7 +585,7 @@ def test_culled_rays_cannot_reach_an_emitter(name):
     points in the scene's box and on its surfaces: every ray whose first hit (Embree) is an
     emitting triangle meets a sphere. The test is not vacuous: rays hit each scene's
     emitter (several hundred rays; tiny_light's sphere is too small for that), and where lights
-    are small (veach_mis, cornell, tiny_light) over 30% of these rays are culled (98% of the
+    are small (veach_mis, cornell, tiny_light) over 30% of these rays are culled (94% of the
     BSDF rays in a veach_mis render)."""
     scene = load_scene(str(default_scene_path().parent / f"{name}.toml"), 16, 16)
     tables = LightSampler(scene).tables
