@@ -128,6 +128,16 @@ def render_batch(estimator: DirectLighting, batch: Batch, seed: int) -> tuple[np
     return radiance.reshape(batch.npix, batch.k, 3), nonfinite
 
 
+def _compile(estimator: DirectLighting, film: Film) -> None:
+    """Run a batch's kernels once on zero lanes before the clock starts, so that numba compiles
+    them (or loads them from its cache) then: the first render after an install would otherwise
+    count seconds of compilation as rendering, unfair in an equal-time comparison."""
+    origins, dirs = estimator.scene.camera.batch_rays(np.uint64(0), 0, 0, 1)
+    radiance = estimator.radiance(origins, dirs, np.random.default_rng(0))
+    _zero_nonfinite(radiance)
+    film.add_block(0, radiance.reshape(0, 1, 3))
+
+
 @jit
 def _zero_nonfinite(radiance: np.ndarray) -> int:
     """Set the rows of ``radiance (n, 3)`` that hold a NaN or an infinity to 0; returns how many."""
@@ -158,6 +168,11 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     nonfinite = 0
     samples = 0
     interrupted = False
+    start = time.perf_counter()
+    _compile(estimator, film)
+    if progress and time.perf_counter() - start > 1.0:
+        print(f"tracer: compiled the shading kernels in {time.perf_counter() - start:.1f} s "
+              "(once after an install or an edit; later runs load them from the cache)", file=sys.stderr)
     start = time.perf_counter()
 
     def merge(batch: Batch, result: tuple[np.ndarray, int]) -> None:
