@@ -13,7 +13,7 @@ import pytest
 from tracer.cli import main
 from tracer.estimators import Strategy
 from tracer.film import CHANNELS, Film
-from tracer.render import RenderSettings, render
+from tracer.render import RenderSettings, plan_batches, render
 from tracer.scene import load_scene
 
 GOOD = """
@@ -253,3 +253,15 @@ def test_primer_command_writes_five_figures(tmp_path, capsys):
     assert len(list(tmp_path.glob("primer_*.png"))) == 5
     out = capsys.readouterr().out
     assert all(f"{k}. " in out for k in range(1, 6))
+
+
+@pytest.mark.parametrize("lanes", [1, 3, 8, 100, 32768])
+def test_batches_cover_every_sample_once_within_the_lane_bound(lanes):
+    """plan_batches gives every (pixel, sample index) exactly one lane and never more than
+    batch_lanes lanes to a batch (the 8-samples-per-pass preference gives way), so render()'s
+    bound on the shading rays of a batch holds for any sample count."""
+    batches = plan_batches(10, 7, 13, first_sample=5, batch_lanes=lanes)
+    assert max(b.lanes for b in batches) <= lanes
+    covered = sorted((b.first_sample + j, p) for b in batches
+                     for p in range(b.first_pixel, b.first_pixel + b.npix) for j in range(b.k))
+    assert covered == [(s, p) for s in range(5, 18) for p in range(70)]

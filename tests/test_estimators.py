@@ -331,3 +331,15 @@ def test_scene_scale_does_not_change_the_image(write_scene):
         close = np.all(np.abs(films[s].mean - base) <= 1e-3 * (np.abs(base) + 1e-3), axis=1)
         assert close.mean() >= 0.99, (s, close.mean())
         np.testing.assert_allclose(films[s].mean.mean(axis=0), base.mean(axis=0), rtol=1e-3)
+
+
+def test_compiled_code_is_keyed_to_all_sources():
+    """numba keys a cache entry to the stamp its locator gives. tracer's kernels inline functions
+    of other modules, so every entry must carry the digest of all package sources, or an edit of
+    lights.py would leave estimators._shade stale (it did, before tracer/jit.py)."""
+    from tracer import estimators, jit
+
+    assert jit.CACHE
+    locator = estimators._shade._cache._impl._locator  # the dispatcher's own cache (numba internals)
+    assert type(locator).__name__.startswith("TracerStamped")
+    assert locator.get_source_stamp() == jit.source_digest()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -21,6 +21,7 @@ class Camera:
     fov: float
     width: int
     height: int
+    _origins: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -53,14 +54,13 @@ class Camera:
         under ``key`` (``tracer.rand``). Returns origins and unit directions ``(npix k, 3)``,
         float32 as Embree takes them."""
         d = _batch_directions(key, first_pixel, npix, k, *self._screen)
+        # One contiguous array of the origin (Embree wants contiguous rows), grown to the
+        # largest batch and shared by the render threads: each keeps its own reference, so a
+        # race between two of them costs at most an extra allocation.
         origins = self._origins
-        if len(origins) < len(d):  # grown once to the largest batch; Embree needs it contiguous
+        if origins is None or len(origins) < len(d):
             origins = self._origins = np.tile(self.origin.astype(np.float32), (len(d), 1))
         return origins[: len(d)], d
-
-    @functools.cached_property
-    def _origins(self) -> np.ndarray:
-        return np.zeros((0, 3), dtype=np.float32)
 
 
 @jit

@@ -44,6 +44,7 @@ the two after all light samples.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -183,11 +184,14 @@ class DirectLighting:
 
 class RayBuffer(NamedTuple):
     """Rays from shading points, written by ``_shade``, one row per sample that may contribute.
+    Shadow and direction rays share the layout; each leaves the other's fields unwritten.
 
     origin, dir : (c, 3) float32 for Embree (dir unit length, world).
     tmax : (c,) float32 shadow-ray length (shadow rays only).
     value : (c, 3) what the sample adds if its ray is unblocked (shadow) or hits an emitter
         (direction; then times the emitter's radiance and the MIS weight).
+    point : (c, 3) float64 shading point the ray leaves (direction rays only): the light pdf
+        of the direction is measured from it, as light sampling measures it.
     pdf : (c,) count-scaled pdf of the direction technique (direction rays only, for MIS).
     lane : (c,) camera lane the sample belongs to.   delta : (c,) a delta sample (weight 1).
     """
@@ -196,14 +200,16 @@ class RayBuffer(NamedTuple):
     dir: np.ndarray
     tmax: np.ndarray
     value: np.ndarray
+    point: np.ndarray
     pdf: np.ndarray
     lane: np.ndarray
     delta: np.ndarray
 
     @classmethod
     def empty(cls, count: int) -> "RayBuffer":
-        return cls(np.empty((count, 3), dtype=np.float32), np.empty((count, 3), dtype=np.float32),
-                   np.empty(count, dtype=np.float32), np.empty((count, 3)), np.empty(count),
+        f32 = np.float32
+        return cls(np.empty((count, 3), dtype=f32), np.empty((count, 3), dtype=f32),
+                   np.empty(count, dtype=f32), np.empty((count, 3)), np.empty((count, 3)), np.empty(count),
                    np.empty(count, dtype=np.int64), np.empty(count, dtype=np.bool_))
 
 
@@ -221,8 +227,8 @@ def _shade(prim, origins, dirs, key, surfaces: Surfaces, light_tables: LightTabl
     direction rays of every shading point into the buffers. Returns their counts."""
     hit_table, kinds, reflectances, alphas, eps = surfaces
     alias_prob, alias, pmf, area, point_lights, _, spheres = light_tables
-    shadow_origin, shadow_dir, shadow_tmax, shadow_value, _, shadow_lane, _ = shadow
-    dir_origin, dir_dir, _, dir_value, dir_pdf, dir_lane, dir_delta = direction
+    shadow_origin, shadow_dir, shadow_tmax, shadow_value, _, _, shadow_lane, _ = shadow
+    dir_origin, dir_dir, _, dir_value, dir_point, dir_pdf, dir_lane, dir_delta = direction
     n_light, n_dir = float(plan.n_light), float(plan.n_dir)
     n_shadow = 0
     n_direction = 0
@@ -236,8 +242,8 @@ def _shade(prim, origins, dirs, key, surfaces: Surfaces, light_tables: LightTabl
         cos_view = -dot(face_normal, d)
         # Emitters seen directly (weight 1 in every strategy): front side only.
         if cos_view > 0.0:
-            for c in range(3):
-                radiance[lane, c] = hit_table[p, 12 + c]
+            for channel in range(3):
+                radiance[lane, channel] = hit_table[p, 12 + channel]
         material = int(hit_table[p, 15])
         kind = kinds[material]
         if kind == bsdf.NONE or cos_view == 0.0:
@@ -279,6 +285,7 @@ def _shade(prim, origins, dirs, key, surfaces: Surfaces, light_tables: LightTabl
                 c *= mis.weight_of(plan.heuristic, own_light * pdf_light, own_dir * pdf_dir)
             value = (reflectance[0] * le[0] * c, reflectance[1] * le[1] * c, reflectance[2] * le[2] * c)
             if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
+                _flag_nan(radiance, lane, value)
                 continue
             # The shadow ray runs from the offset origin to the sampled point, stopping short of it.
             to_target, length = normalized(sub(add_scaled(x, dist, wi_world), origin))
@@ -294,12 +301,15 @@ def _shade(prim, origins, dirs, key, surfaces: Surfaces, light_tables: LightTabl
             c = weight / own_dir
             value = (reflectance[0] * c, reflectance[1] * c, reflectance[2] * c)
             if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
+                _flag_nan(radiance, lane, value)
                 continue
             wi_world = to_world(s, t, normal, wi)
             if not lights.may_reach(spheres, origin, wi_world):
                 continue  # it could only contribute 0: no ray
             dir_pdf[n_direction] = own_dir * pdf_dir
             dir_delta[n_direction] = delta
+            for axis in range(3):
+                dir_point[n_direction, axis] = x[axis]
             n_direction = _put(dir_origin, dir_dir, dir_value, dir_lane, n_direction,
                                origin, wi_world, value, lane)
     return n_shadow, n_direction
@@ -311,6 +321,14 @@ def _plane_distance(hit_table, p, o, cos_normal) -> float:
     cos_normal = d . face normal (nonzero): (v0 - o) . n / (d . n)."""
     return ((hit_table[p, 0] - o[0]) * hit_table[p, 9] + (hit_table[p, 1] - o[1]) * hit_table[p, 10]
             + (hit_table[p, 2] - o[2]) * hit_table[p, 11]) / cos_normal
+
+
+@jit
+def _flag_nan(radiance, lane, value) -> None:
+    """A sample value that is NaN marks its lane's radiance NaN, so that the render loop counts
+    and zeroes it (``render._zero_nonfinite``) instead of the sample vanishing unnoticed."""
+    if math.isnan(value[0] + value[1] + value[2]):
+        radiance[lane, 0] = math.nan
 
 
 @jit
@@ -358,7 +376,7 @@ def _gather(radiance, surfaces: Surfaces, light_tables: LightTables, plan: Plan,
             for c in range(3):
                 radiance[lane, c] += shadow_value[row, c]
     other = plan.c_light if plan.one_sample else float(plan.n_light)
-    origins, dirs, _, values, pdfs, lanes, deltas = direction
+    _, dirs, _, values, points, pdfs, lanes, deltas = direction
     for row in range(len(prim)):
         p = prim[row]
         if p < 0:
@@ -369,8 +387,8 @@ def _gather(radiance, surfaces: Surfaces, light_tables: LightTables, plan: Plan,
             continue  # emitters shine from the front only
         w = 1.0
         if other > 0.0 and not deltas[row]:
-            o = (float(origins[row, 0]), float(origins[row, 1]), float(origins[row, 2]))
-            pdf_light = lights.pdf(by_triangle, p, wi, _plane_distance(hit_table, p, o, cos_normal))
+            x = (points[row, 0], points[row, 1], points[row, 2])
+            pdf_light = lights.pdf(by_triangle, p, wi, _plane_distance(hit_table, p, x, cos_normal))
             w = mis.weight_of(plan.heuristic, pdfs[row], other * pdf_light)
         lane = lanes[row]
         for c in range(3):

@@ -40,21 +40,25 @@ def source_digest() -> bytes:
 
 
 def _install_package_stamp() -> bool:
-    """Put locators first in numba's list that key tracer's cache entries to ``source_digest``.
-    Returns False if this numba lacks the (private) locator API; then nothing is cached."""
+    """Put, ahead of numba's own cache locators, a copy of each source-file-backed one (in
+    numba's order, so ``NUMBA_CACHE_DIR`` still wins) that keys tracer's entries to
+    ``source_digest``. Idempotent. Returns False if this numba lacks the (private) locator API;
+    then nothing is cached. Setting ``NUMBA_CACHE_LOCATOR_CLASSES`` bypasses these locators."""
     try:
         from numba.core import caching
     except ImportError:  # pragma: no cover - numba without its caching module
         return False
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
-    bases = [getattr(caching, name, None) for name in ("InTreeCacheLocator", "_InTreeCacheLocator",
-                                                       "UserWideCacheLocator", "_UserWideCacheLocator")]
-    bases = [b for b in bases if b is not None]
-    if impl is None or not hasattr(impl, "_locator_classes") or len(bases) < 2:
+    file_backed = getattr(caching, "_SourceFileBackedLocatorMixin", None)
+    if impl is None or file_backed is None or not hasattr(impl, "_locator_classes"):
         return False
+    if any(getattr(cls, "tracer_stamped", False) for cls in impl._locator_classes):
+        return True
 
     def stamped(base):
         class PackageStamped(base):
+            tracer_stamped = True
+
             def get_source_stamp(self):
                 return source_digest()
 
@@ -67,7 +71,10 @@ def _install_package_stamp() -> bool:
         PackageStamped.__name__ = f"TracerStamped{base.__name__.lstrip('_')}"
         return PackageStamped
 
-    impl._locator_classes = [stamped(b) for b in bases] + list(impl._locator_classes)
+    ours = [stamped(cls) for cls in impl._locator_classes if issubclass(cls, file_backed)]
+    if not ours:
+        return False
+    impl._locator_classes = ours + list(impl._locator_classes)
     return True
 
 

@@ -244,10 +244,10 @@ class LightSampler:
             alias_prob=alias_prob,
             alias=alias,
             pmf=self.pmf,
-            # float32: the vertices exactly as Embree holds them (edges are formed in float64,
-            # exactly, so sampled points lie on Embree's triangles) and the emission as scene.py
-            # rounds it. A row is one 64-byte cache line, which light sampling reads at random
-            # (11% faster shading on veach_mis than float64).
+            # float32, exactly as the scene holds vertices and emission (scene.py rounds both;
+            # edges are formed in float64, exactly, so sampled points lie on Embree's triangles).
+            # A row is one 64-byte cache line, which light sampling reads at random (11% faster
+            # shading on veach_mis than float64).
             area=np.ascontiguousarray(np.concatenate(
                 [scene.vertices[scene.faces[tri]].reshape(len(tri), 9), scene.normal[tri],
                  scene.emission[tri], pmf_over_area[:, None]], axis=1).reshape(len(tri), 16),

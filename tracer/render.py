@@ -1,7 +1,8 @@
 """The wavefront render loop: batches of (pixel, sample) lanes, threads, progress, Ctrl-C.
 
-A render is cut into batches fixed by the resolution and spp alone: ``k`` samples for each
-of a run of consecutive pixels, ``batch_lanes`` lanes at most. Each batch draws its random
+A render is cut into batches fixed by the resolution, the spp, the batch size and the
+strategy's sample counts (not by the threads): ``k`` samples for each of a run of consecutive
+pixels, ``batch_lanes`` lanes at most. Each batch draws its random
 numbers from keys that its own generator gives, keyed by (seed, first sample index, first
 pixel); see ``tracer.rand``. Batches
 are merged into the film in a fixed order. So the same seed gives the same image bit for bit
@@ -107,7 +108,7 @@ def plan_batches(width: int, height: int, spp: int, first_sample: int = 0,
     has enough lanes to amortize the per-call cost of Embree.
     """
     pixels = width * height
-    k = max(1, min(spp, max(SAMPLES_PER_PASS, batch_lanes // max(pixels, 1))))
+    k = max(1, min(spp, batch_lanes, max(SAMPLES_PER_PASS, batch_lanes // max(pixels, 1))))
     chunk = max(1, min(pixels, batch_lanes // k))
     batches = []
     for s0 in range(0, spp, k):
@@ -159,8 +160,9 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     cam = scene.camera
     film = film if film is not None else Film(cam.width, cam.height)
     estimator = estimator if estimator is not None else DirectLighting(scene, strategy)
-    # A batch casts at most 2 x batch_lanes rays from its shading points, whatever the sample
-    # counts, so that --light-samples 10000 shrinks the batches instead of exhausting memory.
+    # A batch casts at most 2 x batch_lanes rays from its shading points (or one lane's, if
+    # that is more), so that --light-samples 10000 shrinks the batches instead of exhausting
+    # memory.
     per_lane = 1 if strategy.one_sample_mis else strategy.light_count + strategy.direction_count
     lanes = max(1, settings.batch_lanes * 2 // max(2, per_lane))
     batches = plan_batches(cam.width, cam.height, settings.spp, settings.first_sample, lanes)

@@ -41,7 +41,8 @@ def default_scene_path() -> Path:
 class Scene:
     """A loaded scene: triangles with per-triangle tables, materials, point lights, camera.
 
-    vertices : (V, 3) float64 world positions.   faces : (F, 3) int32 vertex indices.
+    vertices : (V, 3) float64 world positions, rounded to float32 (Embree's precision).
+    faces : (F, 3) int32 vertex indices.
     material : (F,) int32 index into the material table (0 is the black material).
     emission : (F, 3) float64 radiance leaving each triangle's front side (0: not emissive);
         the scene file's values rounded to float32.
@@ -64,6 +65,9 @@ class Scene:
     render_defaults: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        # Vertices at float32 precision, as Embree holds them: hit points, light samples and pdfs
+        # then all use the very triangles Embree intersects.
+        self.vertices = np.asarray(self.vertices, dtype=np.float32).astype(np.float64)
         tri = self.vertices[self.faces]
         self.v0 = tri[:, 0]
         self.edge1 = tri[:, 1] - tri[:, 0]
