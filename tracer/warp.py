@@ -141,39 +141,40 @@ def ggx_visible_normal_pdf(h, wo, alpha: float) -> float:
 # The same warps over arrays (tests, primer)
 
 
-@jit
 def sample_uniform_hemisphere(u: np.ndarray) -> np.ndarray:
     """``u (n, 2)`` -> uniform directions ``(n, 3)``."""
-    out = np.empty((len(u), 3))
-    for i in range(len(u)):
-        out[i, 0], out[i, 1], out[i, 2] = uniform_hemisphere(u[i, 0], u[i, 1])
-    return out
+    return _hemisphere_lanes(False, u)
 
 
-@jit
 def pdf_uniform_hemisphere(w: np.ndarray) -> np.ndarray:
     """``w (n, 3)`` -> ``(n,)`` pdf of :func:`sample_uniform_hemisphere`."""
-    out = np.empty(len(w))
-    for i in range(len(w)):
-        out[i] = uniform_hemisphere_pdf(w[i, 2])
-    return out
+    return _hemisphere_pdf_lanes(False, w)
 
 
-@jit
 def sample_cosine_hemisphere(u: np.ndarray) -> np.ndarray:
     """``u (n, 2)`` -> cosine-weighted directions ``(n, 3)``."""
+    return _hemisphere_lanes(True, u)
+
+
+def pdf_cosine_hemisphere(w: np.ndarray) -> np.ndarray:
+    """``w (n, 3)`` -> ``(n,)`` pdf of :func:`sample_cosine_hemisphere`."""
+    return _hemisphere_pdf_lanes(True, w)
+
+
+@jit
+def _hemisphere_lanes(cosine: bool, u: np.ndarray) -> np.ndarray:
     out = np.empty((len(u), 3))
     for i in range(len(u)):
-        out[i, 0], out[i, 1], out[i, 2] = cosine_hemisphere(u[i, 0], u[i, 1])
+        w = cosine_hemisphere(u[i, 0], u[i, 1]) if cosine else uniform_hemisphere(u[i, 0], u[i, 1])
+        out[i, 0], out[i, 1], out[i, 2] = w
     return out
 
 
 @jit
-def pdf_cosine_hemisphere(w: np.ndarray) -> np.ndarray:
-    """``w (n, 3)`` -> ``(n,)`` pdf of :func:`sample_cosine_hemisphere`."""
+def _hemisphere_pdf_lanes(cosine: bool, w: np.ndarray) -> np.ndarray:
     out = np.empty(len(w))
     for i in range(len(w)):
-        out[i] = cosine_hemisphere_pdf(w[i, 2])
+        out[i] = cosine_hemisphere_pdf(w[i, 2]) if cosine else uniform_hemisphere_pdf(w[i, 2])
     return out
 
 
