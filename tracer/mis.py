@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from .jit import jit
 
 HEURISTICS = ("balance", "power", "max")
@@ -46,16 +44,3 @@ def code(heuristic: str) -> int:
     if heuristic not in HEURISTICS:
         raise ValueError(f"unknown heuristic {heuristic!r}; expected one of {HEURISTICS}")
     return HEURISTICS.index(heuristic)
-
-
-def weight(heuristic: str, mine: np.ndarray, other: np.ndarray) -> np.ndarray:
-    """:func:`weight_of` over arrays ``mine, other (n,)`` -> ``(n,)``."""
-    return _weights(code(heuristic), np.asarray(mine, dtype=np.float64), np.asarray(other, dtype=np.float64))
-
-
-@jit
-def _weights(heuristic, mine, other):
-    out = np.empty(len(mine))
-    for i in range(len(mine)):
-        out[i] = weight_of(heuristic, mine[i], other[i])
-    return out

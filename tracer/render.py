@@ -163,7 +163,8 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     # A batch casts at most 2 x batch_lanes rays from its shading points (or one lane's, if
     # that is more), so that --light-samples 10000 shrinks the batches instead of exhausting
     # memory.
-    per_lane = 1 if strategy.one_sample_mis else strategy.light_count + strategy.direction_count
+    runs = estimator.strategy  # the strategy the estimator was built for is the one that runs
+    per_lane = 1 if runs.one_sample_mis else runs.light_count + runs.direction_count
     lanes = max(1, settings.batch_lanes * 2 // max(2, per_lane))
     batches = plan_batches(cam.width, cam.height, settings.spp, settings.first_sample, lanes)
     bar = _progress_bar(cam.width * cam.height * settings.spp, progress)

@@ -207,24 +207,10 @@ def pdf_ggx_visible_normal(h: np.ndarray, wo: np.ndarray, alpha: np.ndarray) -> 
     return out
 
 
-def ggx_d_array(h: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """``(n,)`` D(h) of unit half vectors ``h (n, 3)``, ``alpha (n,)``."""
-    return _scalar_of_cos(0, h, alpha)
-
-
+@jit
 def ggx_g1_array(w: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """``(n,)`` G1(w) of unit directions ``w (n, 3)``, ``alpha (n,)``."""
-    return _scalar_of_cos(1, w, alpha)
-
-
-@jit
-def _scalar_of_cos(which: int, w: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     out = np.empty(len(w))
     for i in range(len(w)):
-        out[i] = ggx_d(w[i, 2], alpha[i]) if which == 0 else ggx_g1(w[i, 2], alpha[i])
+        out[i] = ggx_g1(w[i, 2], alpha[i])
     return out
-
-
-def reflect(w: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Mirror ``w (n, 3)`` about unit normals ``n (n, 3)`` (or the local z axis if n is (3,))."""
-    return 2.0 * np.sum(w * n, axis=-1, keepdims=True) * n - w
