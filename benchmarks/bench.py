@@ -107,9 +107,10 @@ def run_in_child(fn, *args):
 def time_tracer(scene_path: str, size: int, spp: int, strategy: str, threads: int, runs: int) -> dict:
     """Median wall time of ``runs`` renders of one strategy; also setup time and peak RSS."""
     digest = tracer_digest()
-    from tracer.estimators import DirectLighting, Strategy
-    from tracer.render import RenderSettings, render
+    from tracer.estimators import DirectLighting
+    from tracer.render_loop import RenderSettings, render
     from tracer.scene import load_scene
+    from tracer.strategy import Strategy
 
     start = time.perf_counter()
     scene = load_scene(scene_path, size, size)
@@ -178,7 +179,7 @@ def _recording_classes():
         def _record(self, kind: str, origins, dirs, tmax=None) -> None:
             calls = getattr(self._local, "calls", None)
             if calls is None:
-                raise RuntimeError("a ray query outside DirectLighting.radiance: tracer's render loop "
+                raise RuntimeError("a ray query outside DirectLighting.shade_lanes: tracer's render loop "
                                    "changed, update benchmarks/bench.py")
             if len(origins) == 0:  # RayCaster does not call Embree for an empty query
                 return
@@ -201,12 +202,12 @@ def _recording_classes():
             return super().occluded(origins, dirs, tmax)
 
     class RecordingEstimator(DirectLighting):
-        """DirectLighting whose radiance() (one call per render batch) brackets a batch."""
+        """DirectLighting whose shade_lanes() (one call per render batch) brackets a batch."""
 
-        def radiance(self, origins, dirs, rng):
+        def shade_lanes(self, origins, dirs, sampler, pixel, sample):
             self.caster.begin_batch()
             try:
-                return super().radiance(origins, dirs, rng)
+                return super().shade_lanes(origins, dirs, sampler, pixel, sample)
             finally:
                 self.caster.end_batch()
 
@@ -251,9 +252,9 @@ def measure_ceiling(scene_path: str, size: int, spp: int, strategy: str, thread_
     """Record one render's rays (untimed), then time ``runs`` replays for each thread count."""
     digest = tracer_digest()
     from tracer.embree import RayCaster
-    from tracer.estimators import Strategy
-    from tracer.render import RenderSettings, render
+    from tracer.render_loop import RenderSettings, render
     from tracer.scene import load_scene
+    from tracer.strategy import Strategy
 
     recording_caster, recording_estimator = _recording_classes()
     scene = load_scene(scene_path, size, size)
@@ -649,7 +650,7 @@ def main(argv: list[str] | None = None) -> int:
     if min(args.size, args.spp, args.runs, args.threads) < 1:
         parser.error("--size, --spp, --runs and --threads must be at least 1")
 
-    from tracer.scene import STRATEGIES
+    from tracer.strategy import STRATEGIES
 
     strategies = tuple(args.strategies.split(",")) if args.strategies else STRATEGIES
     unknown = set(strategies) - set(STRATEGIES)

@@ -13,9 +13,9 @@ import platform
 import statistics
 import time
 
-from tracer.estimators import Strategy
-from tracer.render import RenderSettings, render
-from tracer.scene import STRATEGIES, default_scene_path, load_scene
+from tracer.render_loop import RenderSettings, render
+from tracer.scene import default_scene_path, load_scene
+from tracer.strategy import STRATEGIES, Strategy
 
 
 def main() -> None:
@@ -36,6 +36,8 @@ def main() -> None:
     print("| strategy | seconds | M samples/s |")
     print("|---|---:|---:|")
     for name in STRATEGIES:
+        # Untimed: the first render of a process compiles (or loads) the kernels.
+        render(scene, Strategy(name), RenderSettings(spp=1, seed=0, threads=args.threads))
         times = []
         for run in range(args.runs):
             start = time.perf_counter()

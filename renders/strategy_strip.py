@@ -12,10 +12,10 @@ import argparse
 import numpy as np
 import OpenImageIO as oiio
 
-from tracer.estimators import Strategy
-from tracer.film import write_png
-from tracer.render import RenderSettings, render
-from tracer.scene import STRATEGIES, default_scene_path, load_scene
+from tracer.imagefiles import write_png
+from tracer.render_loop import RenderSettings, render
+from tracer.scene import default_scene_path, load_scene
+from tracer.strategy import STRATEGIES, Strategy
 
 
 def main() -> None:

@@ -58,16 +58,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-FAMILY_ALPHA = 0.01  # false-alarm probability of a whole suite of chi-square tests
+from tracer.study.statistics import sidak_family
+
+# Re-exported: callers pick a call's alpha as chi2.sidak(n_tests), the level of a suite of n_tests.
+from stats import sidak as sidak
+
 MIN_EXPECTED = 5.0  # cells expecting fewer samples are pooled (Cochran's rule)
 TOL_SIGMA = 0.02  # integration tolerance per cell, in units of the cell's Poisson sigma
 _GAUSS = {k: np.polynomial.legendre.leggauss(k) for k in (2, 3, 4, 5, 6, 8)}
-
-
-def sidak(n_tests: int, alpha: float = FAMILY_ALPHA) -> float:
-    """Per-test level so that n_tests independent tests all pass with probability 1 - alpha:
-    alpha_per_test = 1 - (1 - alpha)^(1 / n_tests)."""
-    return 1.0 - (1.0 - alpha) ** (1.0 / max(int(n_tests), 1))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -515,8 +513,7 @@ def goodness_of_fit(points: np.ndarray, pdf: Callable[[np.ndarray], np.ndarray],
     o_low = obs_all[low]
     if low.any():
         tails = np.where(o_low > 0, stats.poisson.sf(o_low - 1, e_low), 1.0)
-        # Sidak: 1 - (1 - p_min)^m, computed stably.
-        p_low = float(-np.expm1(low.sum() * np.log1p(-min(float(tails.min()), 1.0 - 1e-16))))
+        p_low = sidak_family(float(tails.min()), int(low.sum()))
     else:
         p_low = 1.0
 

@@ -1,9 +1,11 @@
-"""Significance levels and tests shared by the statistical tests.
+"""Test-side shorthands for ``tracer.study.statistics`` at the suite's 1% family rate.
 
 Every statistical test in this suite runs at a family-wise false-alarm rate of 1% (per test
-function), split over its m comparisons with the Sidak correction
-alpha_1 = 1 - (1 - alpha)^(1/m), so that a correct tracer fails a test function with
-probability at most 1% whatever m is; the seeds are fixed, so a pass is reproducible.
+function), split over its m comparisons with the Sidak correction, so that a correct tracer
+fails a test function with probability at most 1% whatever m is; the seeds are fixed, so a
+pass is reproducible. The definitions live in ``tracer.study.statistics``, whose argument order
+is ``(alpha, m)``; the shorthands here take m first and ``alpha`` only by keyword, so that
+``sidak(m)`` reads as "the level for m comparisons" and a swapped call cannot pass silently.
 """
 
 from __future__ import annotations
@@ -11,17 +13,21 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-FAMILY_ALPHA = 0.01
+from tracer.study import statistics
+from tracer.study.statistics import FAMILY_ALPHA
+
+__all__ = ["FAMILY_ALPHA", "image_mean_and_se", "mean_and_se", "sidak", "t_test_mean", "z_critical"]
 
 
-def sidak(m: int, alpha: float = FAMILY_ALPHA) -> float:
-    """Per-comparison significance level for m independent comparisons."""
-    return 1.0 - (1.0 - alpha) ** (1.0 / max(m, 1))
+def sidak(m: int, *, alpha: float = FAMILY_ALPHA) -> float:
+    """Per-comparison level for m independent comparisons: ``statistics.sidak(alpha, m)``."""
+    return statistics.sidak(alpha, m)
 
 
-def z_critical(m: int, alpha: float = FAMILY_ALPHA) -> float:
-    """Two-sided normal critical value after the Sidak correction over m comparisons."""
-    return float(stats.norm.isf(sidak(m, alpha) / 2.0))
+def z_critical(m: int, *, alpha: float = FAMILY_ALPHA, sides: int = 2) -> float:
+    """Normal critical value after the Sidak correction over m comparisons, two-sided (|z|
+    above it rejects) or with ``sides=1`` one-sided (z above it rejects)."""
+    return statistics.z_critical(alpha, m, sides)
 
 
 def mean_and_se(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -36,11 +42,6 @@ def t_test_mean(samples: np.ndarray, expected: np.ndarray) -> np.ndarray:
 
 
 def image_mean_and_se(film) -> tuple[np.ndarray, np.ndarray]:
-    """Mean over pixels of a film's image per channel, and its standard error.
-
-    Pixels are independent, so Var(mean) = sum_p Var(pixel_p) / P^2 with
-    Var(pixel_p) = variance_p / count_p (the film's per-sample variance over its count).
-    """
-    p = len(film.count)
-    var_pixel = film.variance() / np.maximum(film.count, 1)[:, None]
-    return film.mean.mean(axis=0), np.sqrt(var_pixel.sum(axis=0)) / p
+    """Mean over pixels of a film's image per channel ``(3,)``, and its standard error ``(3,)``
+    (``statistics.image_mean_and_se`` of the film's means and their variances)."""
+    return statistics.image_mean_and_se(film.mean, film.variance_of_mean())

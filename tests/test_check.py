@@ -1,14 +1,15 @@
 """tracer check: passes on the shipped tree, fails on a noisier or biased estimator.
 
-The noise tests are one-sided Welch t-tests and the bias tests per-pixel and image-mean
-z-tests, all at a 1% false-alarm rate for the whole baseline file (see tracer/check.py); these
-tests show that the bounds are neither so wide that real regressions pass nor so tight that an
-unchanged tree with other random numbers fails.
+The noise tests are one-sided exact Mann-Whitney U tests and the bias tests per-pixel and
+image-mean z-tests, all at a 1% false-alarm rate for the whole baseline file (see
+tracer/study/check.py); these tests show that the bounds are neither so wide that real
+regressions pass nor so tight that an unchanged tree with other random numbers fails.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -16,8 +17,8 @@ from pathlib import Path
 import pytest
 
 from tracer import estimators
-from tracer.check import format_table, load_baseline, run_check, save_baseline
 from tracer.cli import main
+from tracer.study.check import format_table, load_baseline, run_check, save_baseline
 
 ROOT = Path(__file__).resolve().parent.parent
 BASELINE = ROOT / "renders" / "noise_baseline.json"
@@ -76,8 +77,13 @@ def _patch_estimator(monkeypatch, change):
 def test_noisier_estimator_fails(baseline_copy, monkeypatch):
     """MIS switched by mistake to its one-sample form (one technique per sample, chosen with
     probability 1/2) stays unbiased but takes half the samples: the noise test catches it and
-    the image mean stays unbiased."""
-    _patch_estimator(monkeypatch, lambda est: setattr(est, "plan", est.plan._replace(one_sample=True)))
+    the image mean stays unbiased. The fault: every estimator is built with one_sample set."""
+    original = estimators.DirectLighting.__init__
+
+    def one_sample(self, scene, strategy, *args, **kwargs):
+        original(self, scene, dataclasses.replace(strategy, one_sample=True), *args, **kwargs)
+
+    monkeypatch.setattr(estimators.DirectLighting, "__init__", one_sample)
     result = run_check(baseline_copy, stream=None, entries=_only(baseline_copy, "veach_mis/mis-power"))
     failed = {v.measure for v in result.verdicts if not v.ok}
     assert "relmse" in failed, format_table(result.verdicts)
@@ -86,12 +92,13 @@ def test_noisier_estimator_fails(baseline_copy, monkeypatch):
 
 def test_biased_estimator_fails(baseline_copy, monkeypatch):
     """A light pdf 10% too large (an image 10% too dark) fails the per-pixel and image-mean
-    bias tests. The fault: the selection pmf / area column of the area-light table."""
+    bias tests. The fault: the 1 / area column of the triangle rows of the light table."""
+    from tracer.lights import TRIANGLE_AREA, triangle_area
 
     def biased(est):
-        area = est.lights.tables.area.copy()
-        area[:, 15] *= 1.1
-        est.lights.tables = est.lights.tables._replace(area=area)
+        rows = est.lights.tables.rows.copy()
+        rows[est.lights.tables.technique == TRIANGLE_AREA, triangle_area.INV_AREA] *= 1.1
+        est.lights.tables = est.lights.tables._replace(rows=rows)
 
     _patch_estimator(monkeypatch, biased)
     result = run_check(baseline_copy, stream=None, entries=_only(baseline_copy, "cornell/light"))

@@ -11,10 +11,11 @@ import OpenImageIO as oiio
 import pytest
 
 from tracer.cli import main
-from tracer.estimators import Strategy
-from tracer.film import CHANNELS, Film
-from tracer.render import RenderSettings, plan_batches, render
+from tracer.film import Film
+from tracer.imagefiles import CHANNELS, read_exr
+from tracer.render_loop import SAMPLES_PER_PASS, RenderSettings, plan_batches, render
 from tracer.scene import load_scene
+from tracer.strategy import Strategy
 
 GOOD = """
 [camera]
@@ -193,19 +194,22 @@ def test_default_scene_renders_from_any_directory(tmp_path):
 
 @pytest.mark.parametrize("strategy", [Strategy("mis"), Strategy("light"),
                                       Strategy("mis", "balance", 2, 2, one_sample=True)])
-def test_same_seed_same_image_whatever_threads(tmp_path, strategy):
-    """Bit-identical films for 1 and 2 threads: batches (small, so there are many) draw from
-    generators keyed by their own position and merge in a fixed order."""
+def test_same_seed_same_image_whatever_threads_and_batch_size(tmp_path, strategy):
+    """Bit-identical films for 1 and 2 threads and for three batch sizes (from 7 lanes, smaller
+    than a pass, to all 192 pixels in one batch): every random number is a function of (seed,
+    pixel, sample index, dimension), passes do not depend on the batch size, and batches merge
+    in a fixed order. Exact equality: any dependence on the batch layout changes the bits."""
     scene_path = tmp_path / "s.toml"
     scene_path.write_text(GOOD)
     scene = load_scene(scene_path)
     films = []
-    for threads in (1, 2):
-        settings = RenderSettings(spp=5, seed=11, threads=threads, batch_lanes=100)
+    for threads, lanes in [(1, 100), (2, 100), (2, 7), (1, 1 << 15)]:
+        settings = RenderSettings(spp=13, seed=11, threads=threads, batch_lanes=lanes)
         films.append(render(scene, strategy, settings).film)
-    assert np.array_equal(films[0].mean, films[1].mean)
-    assert np.array_equal(films[0].m2, films[1].m2)
-    other_seed = render(scene, strategy, RenderSettings(spp=5, seed=12, threads=2, batch_lanes=100)).film
+    for film in films[1:]:
+        assert np.array_equal(films[0].mean, film.mean)
+        assert np.array_equal(films[0].m2, film.m2)
+    other_seed = render(scene, strategy, RenderSettings(spp=13, seed=12, threads=2, batch_lanes=100)).film
     assert not np.array_equal(films[0].mean, other_seed.mean)
 
 
@@ -222,29 +226,64 @@ def test_resumed_samples_are_fresh(tmp_path):
     assert a.spp == 8 and isinstance(a, Film)
 
 
+def _start_render(scene, out, spp: int, env=None):
+    """A ``tracer render`` subprocess with SIGINT at its default (a non-interactive shell may
+    start us with SIGINT ignored; Python then keeps it ignored)."""
+    import signal
+
+    return subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(out),
+                             "--spp", str(spp), "--threads", "2"], stderr=subprocess.PIPE, text=True,
+                            env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+
+
 @pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
 def test_interrupt_writes_what_was_rendered(tmp_path, signum):
     """Ctrl-C (or kill) mid-render: exit status 130, the EXR holds every finished sample with its
-    true spp (fewer than asked), and no temporary file is left behind."""
+    true spp (fewer than asked), and no temporary file is left behind. A first tiny render
+    fills the kernel cache, so that the signal lands while rendering, not while compiling."""
     import signal
     import time
 
     scene = tmp_path / "s.toml"
     scene.write_text(GOOD)
     out = tmp_path / "r.exr"
-    # A non-interactive shell may start us with SIGINT ignored; Python then keeps it ignored.
-    proc = subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(out),
-                             "--spp", "10000000", "--threads", "2"], stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    warm = _start_render(scene, out, 1)
+    assert warm.wait(timeout=300) == 0, warm.stderr.read()
+    warm.stderr.close()
+    out.unlink()
+    out.with_suffix(".png").unlink()
+    proc = _start_render(scene, out, 10_000_000)
     time.sleep(4.0)
     proc.send_signal(getattr(signal, signum))
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert "interrupted:" in err and "Traceback" not in err
-    film = Film.read_exr(out)
+    film = read_exr(out)
     assert 0 < film.spp < 10_000_000
-    assert film.attributes["tracer:spp"] == film.spp
+    assert film.record.strategy == "mis" and film.record.seed == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.exr", "r.png", "s.toml"]
+
+
+def test_interrupt_while_compiling_leaves_files_alone(tmp_path):
+    """Ctrl-C during the first compilation (an empty kernel cache, so compiling takes seconds):
+    exit 130 with one line and no traceback, and an existing output file is left as it was
+    (nothing was rendered, so nothing is written over it)."""
+    import os
+    import signal
+    import time
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    out = tmp_path / "r.exr"
+    out.write_bytes(b"an earlier render")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    proc = _start_render(scene, out, 4, env=env)
+    time.sleep(3.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert out.read_bytes() == b"an earlier render"
 
 
 def test_primer_command_writes_five_figures(tmp_path, capsys):
@@ -257,11 +296,12 @@ def test_primer_command_writes_five_figures(tmp_path, capsys):
 
 @pytest.mark.parametrize("lanes", [1, 3, 8, 100, 32768])
 def test_batches_cover_every_sample_once_within_the_lane_bound(lanes):
-    """plan_batches gives every (pixel, sample index) exactly one lane and never more than
-    batch_lanes lanes to a batch (the 8-samples-per-pass preference gives way), so render()'s
-    bound on the shading rays of a batch holds for any sample count."""
-    batches = plan_batches(10, 7, 13, first_sample=5, batch_lanes=lanes)
-    assert max(b.lanes for b in batches) <= lanes
+    """plan_batches gives every (pixel, sample index) exactly one lane, passes of the same k
+    samples whatever the batch size (so the film folds the same groups), and never more than
+    batch_lanes lanes to a batch, or one pixel's pass if that is more."""
+    batches = plan_batches(10, 7, 13, first_sample=5, batch_lanes=lanes, k=SAMPLES_PER_PASS)
+    assert max(b.lanes for b in batches) <= max(lanes, SAMPLES_PER_PASS)
+    assert {b.k for b in batches} == {SAMPLES_PER_PASS, 13 - SAMPLES_PER_PASS}
     covered = sorted((b.first_sample + j, p) for b in batches
                      for p in range(b.first_pixel, b.first_pixel + b.npix) for j in range(b.k))
     assert covered == [(s, p) for s in range(5, 18) for p in range(70)]

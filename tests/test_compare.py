@@ -10,14 +10,15 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from tracer import compare as compare_mod
-from tracer import metrics
 from tracer.cli import main
-from tracer.compare import Comparison, fit_convergence, time_to_reach
-from tracer.estimators import Strategy
 from tracer.film import Film, merge_renders
-from tracer.render import RenderResult, RenderSettings, render, render_attributes
+from tracer.imagefiles import read_exr
+from tracer.render_loop import RenderResult, RenderSettings, render
 from tracer.scene import load_scene
+from tracer.strategy import STRATEGIES, Strategy
+from tracer.study import compare as compare_mod
+from tracer.study import metrics
+from tracer.study.compare import Comparison, fit_convergence, time_to_reach
 
 SCENES = Path(__file__).resolve().parent.parent / "tracer" / "scenes"
 
@@ -64,24 +65,20 @@ def _scene():
 
 
 def test_merge_of_two_32_spp_renders_equals_the_pooled_samples():
-    """Sample indices 0-31 and 32-63 merged hold exactly the samples of one 64-spp render (with one
-    sample per pixel per batch, batches draw the same numbers either way), so count, mean and
-    variance agree to float64 rounding; through EXR files and `tracer merge`, to float32."""
+    """Sample indices 0-31 and 32-63 merged hold exactly the samples of one 64-spp render (random
+    numbers are keyed to seed, pixel and sample index), so count, mean and variance agree to
+    float64 rounding, and the merged record spans samples 0-63; through EXR files and
+    `tracer merge`, to float32."""
     scene = _scene()
     strategy = Strategy("mis")
-    one = RenderSettings(spp=64, seed=3, threads=2, batch_lanes=64)
-    whole = render(scene, strategy, one).film
-    halves = []
-    for first in (0, 32):
-        settings = RenderSettings(spp=32, seed=3, threads=2, batch_lanes=64, first_sample=first)
-        result = render(scene, strategy, settings)
-        result.film.attributes.update(render_attributes(scene, strategy, settings, result))
-        halves.append(result.film)
+    whole = render(scene, strategy, RenderSettings(spp=64, seed=3, threads=2)).film
+    halves = [render(scene, strategy, RenderSettings(spp=32, seed=3, threads=2, first_sample=first)).film
+              for first in (0, 32)]
     merged = merge_renders(*halves)
     assert np.all(merged.count == 64)
     np.testing.assert_allclose(merged.mean, whole.mean, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(merged.variance(), whole.variance(), rtol=1e-9, atol=1e-15)
-    assert merged.attributes["tracer:first_sample"] == 0 and merged.attributes["tracer:next_sample"] == 64
+    assert (merged.record.first_sample, merged.record.next_sample) == (0, 64)
 
 
 def test_merge_command_and_its_refusals(tmp_path, capsys):
@@ -94,7 +91,7 @@ def test_merge_command_and_its_refusals(tmp_path, capsys):
     assert (
         main(["merge", str(tmp_path / "a.exr"), str(tmp_path / "b.exr"), "-o", str(tmp_path / "ab.exr")]) == 0
     )
-    a, b, ab = (Film.read_exr(tmp_path / f"{n}.exr") for n in ("a", "b", "ab"))
+    a, b, ab = (read_exr(tmp_path / f"{n}.exr") for n in ("a", "b", "ab"))
     assert ab.spp == 8
     np.testing.assert_allclose(ab.mean, (a.mean + b.mean) / 2, rtol=1e-6, atol=1e-7)
     capsys.readouterr()
@@ -114,11 +111,11 @@ def test_reference_resume_adds_fresh_samples(tmp_path):
     out = tmp_path / "ref.exr"
     common = ["--width", "12", "--height", "8", "--spp", "4", "--quiet", "-o", str(out)]
     assert main(["reference", scene, *common]) == 0
-    first = Film.read_exr(out)
+    first = read_exr(out)
     assert main(["reference", scene, *common, "--resume"]) == 0
-    both = Film.read_exr(out)
+    both = read_exr(out)
     assert both.spp == 8
-    assert both.attributes["tracer:first_sample"] == 0 and both.attributes["tracer:next_sample"] == 8
+    assert (both.record.first_sample, both.record.next_sample) == (0, 8)
     assert not np.allclose(both.mean, first.mean)
     inp = oiio.ImageInput.open(str(out))
     formats = [str(f) for f in inp.spec().channelformats]
@@ -146,7 +143,8 @@ def test_equal_time_spends_the_budget(monkeypatch):
 
 def test_compare_writes_every_file_and_true_numbers(tmp_path):
     """End to end at 24x16: every promised file exists, index.html links only to files that
-    exist, and MSE/relMSE in metrics.json match an independent computation from the EXRs."""
+    exist, every run's EXR carries its render record, and MSE/relMSE in metrics.json match an
+    independent computation from the EXRs."""
     scene = str(SCENES / "veach_mis.toml")
     ref = tmp_path / "ref.exr"
     assert (
@@ -175,10 +173,14 @@ def test_compare_writes_every_file_and_true_numbers(tmp_path):
         )
         == 0
     )
-    names = ["uniform", "cosine", "bsdf", "light", "mis"]
+    names = list(STRATEGIES)
     for name in names:
         for suffix in (".exr", ".png", "_relerr.png", "_flip.png"):
             assert (out / f"{name}{suffix}").is_file(), name + suffix
+        record = read_exr(out / f"{name}.exr").record
+        assert (record.strategy, record.seed, record.first_sample, record.next_sample) == (name, 0, 0, 4)
+        assert record.heuristic == ("power" if name == "mis" else "none") and record.seconds > 0
+        assert record.sampler and record.scene and record.version
     for file in (
         "grid.png",
         "convergence.png",

@@ -1,4 +1,4 @@
-"""The Monte Carlo primer (tracer/primer.py): every numbered claim of the exercises, checked
+"""The Monte Carlo primer (tracer/study/primer.py): every numbered claim of the exercises, checked
 statistically on the numbers that ``tracer primer`` prints.
 
 The exercises run once, through ``run_all`` with seed 0 (the command's default), and each test
@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from tracer import primer
 from tracer.errors import InputError
+from tracer.study import primer
 
 from stats import sidak, z_critical
 
@@ -31,11 +31,6 @@ def run(tmp_path_factory):
     text = io.StringIO()
     results = primer.run_all(out, seed=0, stream=text)
     return {r.name: r for r in results}, text.getvalue(), out
-
-
-def z_one_sided(m: int) -> float:
-    """One-sided normal critical value after the Sidak correction over m comparisons."""
-    return float(sps.norm.isf(sidak(m)))
 
 
 def sample_variance_se(var: float, mu4: float, n: int) -> float:
@@ -159,7 +154,7 @@ def test_ball_acceptance_matches_volume_and_falls(run):
             assert abs(rate - exact) / se < z_critical(m), d
     se = [math.sqrt(p * (1 - p) / n) for p in nums["exact_rate"]]
     for i in range(len(dims) - 1):
-        assert (rates[i] - rates[i + 1]) / math.hypot(se[i], se[i + 1]) > z_one_sided(m), dims[i]
+        assert (rates[i] - rates[i + 1]) / math.hypot(se[i], se[i + 1]) > z_critical(m, sides=1), dims[i]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -273,7 +268,7 @@ def test_mis_other_weights_biased_by_predicted_amount(run):
         est = r["estimates"]
         se = math.sqrt(r["var"] / len(est))
         assert abs(est.mean() - (nums["I"] + r["bias"])) / se < z_critical(4), name
-        assert (est.mean() - nums["I"]) / se > z_one_sided(4), name
+        assert (est.mean() - nums["I"]) / se > z_critical(4, sides=1), name
 
 
 def test_mis_variances_match_quadrature(run):
@@ -301,7 +296,7 @@ def test_mis_heuristics_beat_each_pdf_alone(run):
             se = math.hypot(sample_variance_se(a["var"], a["mu4"], len(a["estimates"])),
                             sample_variance_se(b["var"], b["mu4"], len(b["estimates"])))
             diff = a["estimates"].var(ddof=1) - b["estimates"].var(ddof=1)
-            assert diff / se > z_one_sided(4), (s, c)
+            assert diff / se > z_critical(4, sides=1), (s, c)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -327,7 +322,7 @@ def test_qmc_sobol_rate_steeper_than_mc(run):
     nums = run[0]["qmc"].numbers
     assert abs(nums["mc_rate"] + 0.5) / nums["mc_rate_se"] < z_critical(2)
     gap = nums["mc_rate"] - nums["sobol_rate"] - 0.5
-    assert gap / math.hypot(nums["mc_rate_se"], nums["sobol_rate_se"]) > z_one_sided(2)
+    assert gap / math.hypot(nums["mc_rate_se"], nums["sobol_rate_se"]) > z_critical(2, sides=1)
 
 
 def test_qmc_skipped_without_scipy(monkeypatch):

@@ -20,9 +20,10 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
-from tracer import bsdf, lights, warp
+from tracer import lights, materials, warp
 from tracer.embree import RayCaster
 from tracer.lights import LightSampler
+from tracer.materials import Materials
 from tracer.scene import default_scene_path, load_scene
 
 import chi2
@@ -70,13 +71,22 @@ def random_upper(n: int, gen: np.random.Generator, zmin: float = 1e-3) -> np.nda
     return unit(np.where(w[:, 2:3] < zmin, w + [0.0, 0.0, zmin], w))
 
 
-def make_bsdf(kind: int, n: int, alpha: float = 1.0, reflectance=(0.9, 0.6, 0.3)) -> bsdf.Bsdf:
+DIFFUSE, ROUGH_CONDUCTOR, MIRROR = "diffuse", "roughconductor", "mirror"
+
+
+def materials_of(kind, reflectance: np.ndarray, alpha) -> Materials:
+    """Lanes of material type(s) ``kind`` with per-lane reflectance (n, 3) and alpha (n,)."""
+    n = len(reflectance)
+    return Materials.per_lane(kind, {"reflectance": reflectance, "alpha": np.broadcast_to(alpha, (n,))})
+
+
+def make_bsdf(kind: str, n: int, alpha: float = 1.0, reflectance=(0.9, 0.6, 0.3)) -> Materials:
     refl = np.tile(np.asarray(reflectance, dtype=np.float64), (n, 1))
-    return bsdf.Bsdf(np.full(n, kind, dtype=np.int8), refl, np.full(n, float(alpha)))
+    return materials_of(kind, refl, float(alpha))
 
 
-def bsdf_pdf_of(kind: int, wo: np.ndarray, alpha: float = 1.0):
-    """wi (m, 3) -> Bsdf.pdf(wo, wi) for a fixed wo: the density chi2 integrates."""
+def bsdf_pdf_of(kind: str, wo: np.ndarray, alpha: float = 1.0):
+    """wi (m, 3) -> Materials.pdf(wo, wi) for a fixed wo: the density chi2 integrates."""
     def pdf(wi: np.ndarray) -> np.ndarray:
         return make_bsdf(kind, len(wi), alpha).pdf(np.tile(wo, (len(wi), 1)), wi)
     return pdf
@@ -188,11 +198,11 @@ def sample_bsdf(kind: int, wo: np.ndarray, alpha: float, n: int, gen: np.random.
 
 @pytest.mark.parametrize("wo_name", DIFFUSE_WO)
 def test_diffuse_bsdf_chi2(wo_name):
-    """Diffuse sample() directions vs. Bsdf.pdf over the whole sphere (cos theta, phi); every
+    """Diffuse sample() directions vs. Materials.pdf over the whole sphere (cos theta, phi); every
     sample is valid and pdf integrates to 1; level ALPHA."""
     wo = WO_CASES[wo_name]
-    _, _, s = sample_bsdf(bsdf.DIFFUSE, wo, 1.0, N_SAMPLES, rng(5, DIFFUSE_WO.index(wo_name)))
-    result = chi2.goodness_of_fit(s.wi, bsdf_pdf_of(bsdf.DIFFUSE, wo),
+    _, _, s = sample_bsdf(DIFFUSE, wo, 1.0, N_SAMPLES, rng(5, DIFFUSE_WO.index(wo_name)))
+    result = chi2.goodness_of_fit(s.wi, bsdf_pdf_of(DIFFUSE, wo),
                                   chi2.spherical_domain(polar="z"), GRID, ALPHA,
                                   valid=s.pdf > 0.0, name=f"diffuse wo={wo_name}")
     assert abs(result.integral - 1.0) < 1e-12
@@ -201,7 +211,7 @@ def test_diffuse_bsdf_chi2(wo_name):
 
 @pytest.mark.parametrize("alpha,wo_name", GGX_CASES)
 def test_rough_conductor_bsdf_chi2(alpha, wo_name):
-    """GGX sample() directions vs. Bsdf.pdf, (theta, phi) cells on a cap around the mirror
+    """GGX sample() directions vs. Materials.pdf, (theta, phi) cells on a cap around the mirror
     direction; level ALPHA.
 
     What is right below the horizon: wi = reflect(wo, h) with h from the visible normals falls
@@ -216,38 +226,96 @@ def test_rough_conductor_bsdf_chi2(alpha, wo_name):
     wo = WO_CASES[wo_name]
     n = N_SAMPLES // 2
     gen = rng(6, int(alpha * 100), list(WO_CASES).index(wo_name))
-    _, _, s = sample_bsdf(bsdf.ROUGH_CONDUCTOR, wo, alpha, n, gen)
+    _, _, s = sample_bsdf(ROUGH_CONDUCTOR, wo, alpha, n, gen)
     invalid = s.pdf <= 0.0
     assert np.all(s.weight[invalid] == 0.0)
     assert np.all(s.wi[invalid, 2] <= 0.0), "only directions below the surface may be invalid"
     assert not np.any(s.delta)
     mirror_dir = wo * [-1.0, -1.0, 1.0]
     domain = chi2.spherical_domain(mirror_dir, min(np.pi, 2.0 * np.arctan(5.0 * alpha)))
-    result = chi2.goodness_of_fit(s.wi, bsdf_pdf_of(bsdf.ROUGH_CONDUCTOR, wo, alpha), domain, GRID,
+    result = chi2.goodness_of_fit(s.wi, bsdf_pdf_of(ROUGH_CONDUCTOR, wo, alpha), domain, GRID,
                                   ALPHA, valid=~invalid, name=f"ggx bsdf a={alpha} wo={wo_name}")
     check(result)
 
 
-@pytest.mark.parametrize("kind", [bsdf.DIFFUSE, bsdf.ROUGH_CONDUCTOR])
+@pytest.mark.parametrize("kind", [DIFFUSE, ROUGH_CONDUCTOR])
 def test_bsdf_sample_pdf_weight_agree_with_pdf_and_eval(kind):
-    """On valid samples (pdf > 0), sample().pdf == pdf(wo, wi) and sample().weight ==
-    eval(wo, wi) cos(theta_i) / pdf, to RTOL (algebraically equal, different float paths);
-    invalid samples have weight 0. Many wo (down to wo.z = 0.01) and alphas in one batch."""
+    """On valid samples (pdf > 0), sample().pdf and pdf(wo, wi) both equal the density written
+    here independently (diffuse: cos / pi; GGX: the visible-normal density D_wo(h) / (4 wo.h)
+    of ``warp.pdf_ggx_visible_normal``, a different formula from the material's
+    D / (2 (cos_o + sigma_o))), and sample().weight == eval(wo, wi) cos(theta_i) / pdf, to RTOL
+    (algebraically equal, different float paths); invalid samples have weight 0. Many wo (down
+    to wo.z = 0.01) and alphas in one batch."""
     n = 200_000
-    gen = rng(7, kind)
+    gen = rng(7, ["diffuse", "roughconductor"].index(kind))
     wo = random_upper(n, gen, zmin=0.01)
     alpha = gen.choice(np.array([0.01, 0.05, 0.2, 0.7, 1.5]), n)
     refl = gen.random((n, 3))
-    b = bsdf.Bsdf(np.full(n, kind, dtype=np.int8), refl, alpha)
+    b = materials_of(kind, refl, alpha)
     s = b.sample(gen.random((n, 2)), wo)
     ok = s.pdf > 0.0
     assert ok.mean() > 0.5
     assert np.all(s.weight[~ok] == 0.0)
     np.testing.assert_allclose(np.linalg.norm(s.wi, axis=1), 1.0, atol=1e-12)
-    np.testing.assert_allclose(s.pdf[ok], b.take(ok).pdf(wo[ok], s.wi[ok]), rtol=RTOL, atol=0)
+    wi = s.wi[ok]
+    if kind == DIFFUSE:
+        expected_pdf = wi[:, 2] / np.pi
+    else:
+        h = unit(wo[ok] + wi)
+        expected_pdf = warp.pdf_ggx_visible_normal(h, wo[ok], alpha[ok]) / (4.0 * np.sum(wo[ok] * h, axis=1))
+    np.testing.assert_allclose(s.pdf[ok], expected_pdf, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(b.take(ok).pdf(wo[ok], wi), expected_pdf, rtol=1e-9, atol=0)
     f = b.take(ok).eval(wo[ok], s.wi[ok])
     expected_weight = f * s.wi[ok, 2:3] / s.pdf[ok, None]
     np.testing.assert_allclose(s.weight[ok], expected_weight, rtol=RTOL, atol=1e-300)
+
+
+def _random_parameters(kind, n: int, gen: np.random.Generator) -> dict[str, np.ndarray]:
+    """Per-lane parameters of material type ``kind`` drawn inside each parameter's declared
+    range (the lower 15% of a wide range such as GGX alpha's (0, 10], where materials live)."""
+    values = {}
+    for p in kind.params:
+        lo = 0.0 if p.lo is None else p.lo
+        hi = lo + 1.0 if p.hi is None else p.hi
+        top = hi if hi - lo <= 1.0 else lo + 0.15 * (hi - lo)
+        values[p.name] = gen.uniform(lo + 0.01 * (top - lo), top, (n, p.size)).squeeze(axis=1) \
+            if p.size == 1 else gen.uniform(lo, top, (n, p.size))
+    return values
+
+
+@pytest.mark.parametrize("type_name", sorted(materials.TYPES))
+def test_every_material_keeps_the_interface_contract(type_name):
+    """For every registered material type (a new one is tested here without a line of test
+    code): sampled lobes are among the type's declared lobes; a delta sample has pdf 0, and
+    eval and pdf give 0 for its direction (no other technique may claim it); a valid non-delta
+    sample's pdf equals pdf(wo, wi) and its weight equals eval cos / pdf, to RTOL; an invalid
+    sample has weight 0 and no flags; eval and pdf vanish below the surface; weights are finite
+    and non-negative. Deterministic checks on 50,000 lanes."""
+    kind = materials.TYPES[type_name]
+    n = 50_000
+    gen = rng(22, sorted(materials.TYPES).index(type_name))
+    b = Materials.per_lane(type_name, _random_parameters(kind, n, gen))
+    wo = random_upper(n, gen, zmin=0.01)
+    s = b.sample(gen.random((n, 2)), wo)
+    assert np.all(np.isfinite(s.weight)) and np.all(s.weight >= 0.0)
+    assert np.all((s.flags & ~kind.lobes) == 0)
+    delta = (s.flags & materials.DELTA) != 0
+    valid = (s.flags != 0) & ~delta
+    invalid = s.flags == 0
+    assert valid.mean() + delta.mean() > 0.5
+    assert np.all(s.weight[invalid] == 0.0)
+    assert np.all(s.pdf[delta] == 0.0)
+    if delta.any():
+        assert np.all(b.take(delta).eval(wo[delta], s.wi[delta]) == 0.0)
+        assert np.all(b.take(delta).pdf(wo[delta], s.wi[delta]) == 0.0)
+    if valid.any():
+        bv, wov, wiv = b.take(valid), wo[valid], s.wi[valid]
+        assert np.all(s.pdf[valid] > 0.0)
+        np.testing.assert_allclose(bv.pdf(wov, wiv), s.pdf[valid], rtol=RTOL, atol=0)
+        expected = bv.eval(wov, wiv) * wiv[:, 2:3] / s.pdf[valid, None]
+        np.testing.assert_allclose(s.weight[valid], expected, rtol=RTOL, atol=1e-300)
+    below = unit(gen.normal(size=(n, 3)) * [1.0, 1.0, 0.0] - [0.0, 0.0, 0.1])
+    assert np.all(b.eval(wo, below) == 0.0) and np.all(b.pdf(wo, below) == 0.0)
 
 
 def test_mixed_batch_matches_homogeneous_batches():
@@ -255,15 +323,15 @@ def test_mixed_batch_matches_homogeneous_batches():
     the same lanes evaluated kind by kind (lane splitting must not mix up rows)."""
     n = 3000
     gen = rng(8)
-    kind = gen.choice(np.array([bsdf.DIFFUSE, bsdf.ROUGH_CONDUCTOR, bsdf.MIRROR], dtype=np.int8), n)
-    b = bsdf.Bsdf(kind, gen.random((n, 3)), gen.uniform(0.05, 1.0, n))
+    kind = gen.choice(np.array([DIFFUSE, ROUGH_CONDUCTOR, MIRROR]), n)
+    b = materials_of(kind, gen.random((n, 3)), gen.uniform(0.05, 1.0, n))
     wo, wi, u = random_upper(n, gen), unit(gen.normal(size=(n, 3))), gen.random((n, 2))
     s, f, p = b.sample(u, wo), b.eval(wo, wi), b.pdf(wo, wi)
-    for k in (bsdf.DIFFUSE, bsdf.ROUGH_CONDUCTOR, bsdf.MIRROR):
+    for k in (DIFFUSE, ROUGH_CONDUCTOR, MIRROR):
         idx = np.flatnonzero(kind == k)
         bk = b.take(idx)
         sk = bk.sample(u[idx], wo[idx])
-        for name in ("wi", "weight", "pdf", "delta"):
+        for name in ("wi", "weight", "pdf", "flags"):
             np.testing.assert_array_equal(getattr(s, name)[idx], getattr(sk, name),
                                           err_msg=f"{k} {name}")
         np.testing.assert_array_equal(f[idx], bk.eval(wo[idx], wi[idx]))
@@ -278,7 +346,7 @@ def test_mirror_is_exact_delta_reflection():
     gen = rng(9)
     wo = random_upper(n, gen)
     refl = gen.random((n, 3))
-    b = bsdf.Bsdf(np.full(n, bsdf.MIRROR, dtype=np.int8), refl, np.ones(n))
+    b = materials_of(MIRROR, refl, 1.0)
     s = b.sample(gen.random((n, 2)), wo)
     np.testing.assert_array_equal(s.wi, wo * [-1.0, -1.0, 1.0])
     np.testing.assert_allclose(s.wi, wo * np.array([-1.0, -1.0, 1.0]), atol=1e-15)  # reflected about z
@@ -299,8 +367,8 @@ def test_bsdfs_vanish_below_the_surface():
     wi[:, 2] = -np.abs(wi[:, 2])
     wi[:10, 2] = 0.0
     wi = unit(wi)
-    for kind in (bsdf.DIFFUSE, bsdf.ROUGH_CONDUCTOR):
-        b = bsdf.Bsdf(np.full(n, kind, dtype=np.int8), np.ones((n, 3)), gen.uniform(0.05, 1.0, n))
+    for kind in (DIFFUSE, ROUGH_CONDUCTOR):
+        b = materials_of(kind, np.ones((n, 3)), gen.uniform(0.05, 1.0, n))
         assert np.all(b.eval(wo, wi) == 0.0) and np.all(b.pdf(wo, wi) == 0.0)
 
 
@@ -310,9 +378,8 @@ def test_bsdf_eval_is_reciprocal():
     n = 50000
     gen = rng(11)
     wo, wi = random_upper(n, gen), random_upper(n, gen)
-    for kind in (bsdf.DIFFUSE, bsdf.ROUGH_CONDUCTOR):
-        b = bsdf.Bsdf(np.full(n, kind, dtype=np.int8), gen.random((n, 3)),
-                      gen.uniform(0.02, 1.5, n))
+    for kind in (DIFFUSE, ROUGH_CONDUCTOR):
+        b = materials_of(kind, gen.random((n, 3)), gen.uniform(0.02, 1.5, n))
         f1, f2 = b.eval(wo, wi), b.eval(wi, wo)
         assert np.all(f1 >= 0.0) and np.all(np.isfinite(f1))
         np.testing.assert_allclose(f1, f2, rtol=1e-12, atol=0)
@@ -351,7 +418,7 @@ def test_ggx_pdf_mass_and_energy(alpha, wo_name):
     - q(wi) = D_wo(h) / (4 wo.h), h = normalize(wo + wi), the density of reflect(wo, h) on the
       whole sphere, integrates to 1 over wi (this checks the 1/(4 wo.h) Jacobian); it is 0 for
       wi.z < -wo.z, where h.z < 0, so that cone is the domain's boundary;
-    - Bsdf.pdf equals q where wi.z > 0 and 0 elsewhere (pointwise, RTOL): its integral over wi
+    - Materials.pdf equals q where wi.z > 0 and 0 elsewhere (pointwise, RTOL): its integral over wi
       is P(reflect(wo, h).z > 0) <= 1, the mass the sampler keeps (the chi-square test checks
       the same mass statistically through its rest cell);
     - the white furnace: the integral of f cos over wi (reflectance 1) is <= 1 and equals the
@@ -368,10 +435,10 @@ def test_ggx_pdf_mass_and_energy(alpha, wo_name):
         h = unit(wo + wi)
         return vndf(h) / (4.0 * np.sum(wo * h, axis=1))
 
-    pdf = bsdf_pdf_of(bsdf.ROUGH_CONDUCTOR, wo, alpha)
+    pdf = bsdf_pdf_of(ROUGH_CONDUCTOR, wo, alpha)
 
     def f_cos(wi):
-        b = make_bsdf(bsdf.ROUGH_CONDUCTOR, len(wi), alpha, (1.0, 1.0, 1.0))
+        b = make_bsdf(ROUGH_CONDUCTOR, len(wi), alpha, (1.0, 1.0, 1.0))
         return b.eval(tile(wo, len(wi)), wi)[:, 0] * wi[:, 2]
 
     def pdf_g1(wi):
@@ -401,11 +468,11 @@ def test_diffuse_energy_and_mass():
     refl = (0.9, 0.6, 0.3)
 
     def f_cos(wi):
-        b = make_bsdf(bsdf.DIFFUSE, len(wi), 1.0, refl)
+        b = make_bsdf(DIFFUSE, len(wi), 1.0, refl)
         return b.eval(np.tile(wo, (len(wi), 1)), wi)[:, 1] * wi[:, 2]
 
     assert abs(cubature(f_cos).total - 0.6) < 1e-9
-    assert abs(cubature(bsdf_pdf_of(bsdf.DIFFUSE, wo)).total - 1.0) < 1e-9
+    assert abs(cubature(bsdf_pdf_of(DIFFUSE, wo)).total - 1.0) < 1e-9
 
 
 # ---------------------------------------------------------------------------------------------
@@ -483,7 +550,7 @@ def light_pdf_on_sphere(sampler: LightSampler, caster: RayCaster, x: np.ndarray,
         if light is not None:
             found &= scene.light_of_triangle[np.maximum(hits.prim, 0)] == light
         p = np.zeros(len(w))
-        p[found] = sampler.pdf(hits.prim[found], w[found], hits.t[found])
+        p[found] = sampler.pdf(np.tile(x, (int(found.sum()), 1)), hits.prim[found], w[found], hits.t[found])
         return p
     return pdf
 
@@ -550,7 +617,7 @@ def test_light_sampling_chi2(case, tmp_path):
 
 @pytest.mark.parametrize("case", LIGHT_CASES)
 def test_light_sample_pdf_agrees_with_pdf(case, tmp_path):
-    """For valid light samples, LightSampler.pdf(prim, wi, dist) equals the sample's pdf to
+    """For valid light samples, LightSampler.pdf(x, prim, wi, dist) equals the sample's pdf to
     RTOL, with prim found by casting the ray (Embree is float32, so lanes whose hit lies within
     1e-4 of a triangle edge, where the neighbour may be reported, are left out: the pdf is
     discontinuous across sphere facets). The cast distance matches dist to float32 accuracy."""
@@ -567,10 +634,11 @@ def test_light_sample_pdf_agrees_with_pdf(case, tmp_path):
     np.testing.assert_allclose(hits.t, dist, rtol=1e-5)
     inner = np.minimum(np.minimum(hits.u, hits.v), 1.0 - hits.u - hits.v) > 1e-4
     assert inner.mean() > 0.95
-    np.testing.assert_allclose(sampler.pdf(hits.prim[inner], wi[inner], dist[inner]), pdf[inner],
+    xs = np.tile(x, (len(wi), 1))
+    np.testing.assert_allclose(sampler.pdf(xs[inner], hits.prim[inner], wi[inner], dist[inner]), pdf[inner],
                                rtol=RTOL, atol=0)
     # Seen from the back (the same triangle, the direction reversed), a one-sided emitter has pdf 0.
-    assert np.all(sampler.pdf(hits.prim, -wi, dist) == 0.0)
+    assert np.all(sampler.pdf(xs, hits.prim, -wi, dist) == 0.0)
     # The radiance is the emission of the triangle the direction hits (exact copy).
     np.testing.assert_array_equal(s.radiance[valid][inner], scene.emission[hits.prim[inner]])
 
@@ -639,12 +707,14 @@ intensity = [1.0, 2.0, 3.0]
     p = stats.binomtest(int(s.delta.sum()), N_SAMPLES, share).pvalue
     print(f"point light share {share:.4f}, observed {s.delta.mean():.4f}, p={p:.3g}")
     assert p >= ALPHA
-    d = np.array([0.6, 0.9, -0.2]) - x
+    # The scene holds light positions and intensities at float32 precision, as its light table
+    # does; the formulas below start from those values.
+    d = scene.point_position[0] - x
     dist = np.linalg.norm(d)
     m = int(s.delta.sum())
     np.testing.assert_allclose(s.wi[s.delta], np.tile(d / dist, (m, 1)), rtol=RTOL, atol=1e-15)
     np.testing.assert_allclose(s.dist[s.delta], dist, rtol=RTOL)
-    np.testing.assert_allclose(s.radiance[s.delta], np.tile([1.0, 2.0, 3.0], (m, 1)) / dist**2,
+    np.testing.assert_allclose(s.radiance[s.delta], np.tile(scene.point_intensity[0], (m, 1)) / dist**2,
                                rtol=RTOL)
     np.testing.assert_allclose(s.pdf[s.delta], share, rtol=RTOL)
     assert np.all(s.pdf[~s.delta] > 0.0)

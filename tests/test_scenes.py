@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from tracer.estimators import Strategy
-from tracer.render import RenderSettings, render
+from tracer.render_loop import RenderSettings, render
 from tracer.scene import load_scene
+from tracer.strategy import Strategy
 
 from stats import image_mean_and_se, sidak
 

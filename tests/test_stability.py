@@ -10,19 +10,33 @@ from __future__ import annotations
 
 import copy
 import json
+import tomllib
 
 import numpy as np
 import pytest
 
 from tracer.cli import main
 from tracer.estimators import DirectLighting
-from tracer.stability import Cell, cases, expectations, load_case, run_case, run_suite
+from tracer.study.stability import CASE_DIR, Cell, cases, expectations, load_case, run_case, run_suite
 
 
 @pytest.fixture(scope="module")
 def suite(tmp_path_factory):
     out = tmp_path_factory.mktemp("stability")
     return out, run_suite(out, stream=None)
+
+
+def test_every_case_is_a_documented_scene_file():
+    """Each case names a scene file in tracer/study/cases/ that says in its header what it
+    demonstrates, and every file there belongs to a case (a mesh to a case's scene)."""
+    used = set()
+    for case in cases():
+        text = case.path.read_text()
+        assert text.startswith(f"# Stability case {case.scene or case.name}:"), case.name
+        scene = tomllib.loads(text)
+        used |= {case.path.name} | {s["file"] for s in scene.get("shapes", []) if "file" in s}
+    shipped = {p.name for p in CASE_DIR.iterdir() if p.suffix in (".toml", ".ply")}
+    assert used == shipped
 
 
 def test_everything_that_must_hold_holds(suite):
@@ -108,16 +122,19 @@ def test_image_that_brightens_with_the_sample_count_is_caught(tmp_path, monkeypa
     is flagged as biased against the 1 + 1 reference. Only light sampling sees a point light,
     so scaling the point light's intensity in the light table by the light sample count, for
     the strategies that take more than one, has exactly that bug's effect."""
+    from tracer.lights import POINT, point
+
     original = DirectLighting.__init__
 
     def not_divided(self, scene, strategy, *args, **kwargs):
         original(self, scene, strategy, *args, **kwargs)
-        point = self.lights.tables.point.copy()
-        point[:, 3:6] *= max(strategy.light_count, 1)
-        self.lights.tables = self.lights.tables._replace(point=point)
+        rows = self.lights.tables.rows.copy()
+        points = self.lights.tables.technique == POINT
+        rows[points, point.INTENSITY:point.INTENSITY + 3] *= max(strategy.light_count, 1)
+        self.lights.tables = self.lights.tables._replace(rows=rows)
 
     case = next(c for c in cases() if c.name == "point_light_4l_1b")
-    scene = load_case(case, tmp_path)
+    scene = load_case(case)
     monkeypatch.setattr(DirectLighting, "__init__", not_divided)
     cells = run_case(case, scene)
     doc = {"cells": [c.__dict__ for c in cells], "veach_bound": {}}

@@ -7,8 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import rand
+from . import samplers
 from .jit import jit
+from .samplers import dimensions
 
 
 @dataclass
@@ -47,13 +48,12 @@ class Camera:
         d = _directions(np.asarray(pixel), np.asarray(jitter, dtype=np.float64), *self._screen)
         return np.broadcast_to(self.origin, d.shape), d
 
-    def batch_rays(self, key: np.uint64, first_pixel: int, npix: int,
-                   k: int) -> tuple[np.ndarray, np.ndarray]:
-        """The camera rays of a render batch: k samples for each of pixels first_pixel, ...,
-        npix of them, pixel by pixel; lane i's jitter is dimensions 0 and 1 of its stream
-        under ``key`` (``tracer.rand``). Returns origins and unit directions ``(npix k, 3)``,
-        float32 as Embree takes them."""
-        d = _batch_directions(key, first_pixel, npix, k, *self._screen)
+    def lane_rays(self, sampler: samplers.SamplerParams, pixel: np.ndarray,
+                  sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The camera rays of lanes ``(pixel[i], sample[i])`` (``(n,)`` int64 each): the jitter
+        inside the pixel is the sampler's camera dimensions (``samplers.dimensions``). Returns
+        origins and unit directions ``(n, 3)``, float32 as Embree takes them."""
+        d = _lane_directions(sampler, pixel, sample, *self._screen)
         # One contiguous array of the origin (Embree wants contiguous rows), grown to the
         # largest batch and shared by the render threads: each keeps its own reference, so a
         # race between two of them costs at most an extra allocation.
@@ -84,12 +84,13 @@ def _directions(pixel, jitter, width, height, tan_half, f, r, u) -> np.ndarray:
 
 
 @jit
-def _batch_directions(key, first_pixel, npix, k, width, height, tan_half, f, r, u) -> np.ndarray:
-    d = np.empty((npix * k, 3), dtype=np.float32)
-    for i in range(npix * k):
-        pixel = first_pixel + i // k
-        stream = rand.lane_stream(key, i)
-        d[i, 0], d[i, 1], d[i, 2] = _direction((pixel % width) + rand.uniform(stream, 0),
-                                               (pixel // width) + rand.uniform(stream, 1),
-                                               width, height, tan_half, f, r, u)
+def _lane_directions(sampler, pixel, sample, width, height, tan_half, f, r, u) -> np.ndarray:
+    d = np.empty((len(pixel), 3), dtype=np.float32)
+    for i in range(len(pixel)):
+        p = pixel[i]
+        state = samplers.start(sampler, p, sample[i])
+        d[i, 0], d[i, 1], d[i, 2] = _direction(
+            (p % width) + samplers.uniform(sampler, state, dimensions.CAMERA_JITTER),
+            (p // width) + samplers.uniform(sampler, state, dimensions.CAMERA_JITTER + 1),
+            width, height, tan_half, f, r, u)
     return d

@@ -60,7 +60,7 @@ def _crop(text: str) -> tuple[int, int, int, int]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .scene import STRATEGIES
+    from .strategy import STRATEGIES
 
     parser = argparse.ArgumentParser(
         prog="tracer", description="Direct-lighting path tracer for comparing sampling strategies.")
@@ -122,8 +122,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     ch = sub.add_parser("check", help="regression-test noise levels and bias against a baseline",
                         description="Render every baseline entry with its seeds and test that noise did not "
-                        "grow (one-sided Welch t-tests) and the image is unbiased (per-pixel z-tests and an "
-                        "image-mean test against the reference), at a 1%% false-alarm rate for the file.")
+                        "grow (one-sided exact Mann-Whitney U tests) and the image is unbiased "
+                        "(per-pixel z-tests and an image-mean test against the reference), at a 1%% "
+                        "false-alarm rate for the file.")
     ch.add_argument("--baseline", default=None,
                     help="baseline JSON (default renders/noise_baseline.json)")
     ch.add_argument("--update", action="store_true", help="rewrite the baseline from fresh measurements")
@@ -170,8 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_strategy_options(p: argparse.ArgumentParser) -> None:
-    from .lights import SELECTIONS
-    from .mis import HEURISTICS
+    from .strategy import HEURISTICS, LIGHT_SELECTIONS
 
     p.add_argument("--heuristic", choices=HEURISTICS, default="power", help="MIS heuristic (default power)")
     p.add_argument("--light-samples", type=_count, default=1, metavar="N",
@@ -180,7 +180,7 @@ def _add_strategy_options(p: argparse.ArgumentParser) -> None:
                    help="direction samples per camera sample (uniform, cosine, bsdf, mis; default 1)")
     p.add_argument("--one-sample", action="store_true",
                    help="one-sample MIS: each camera sample picks light or BSDF with probability N:M")
-    p.add_argument("--light-selection", choices=SELECTIONS, default="power",
+    p.add_argument("--light-selection", choices=LIGHT_SELECTIONS, default="power",
                    help="how to pick the light to sample (default: in proportion to power)")
 
 
@@ -226,7 +226,7 @@ def _terminate_like_ctrl_c() -> None:
 
 
 def _strategy_from(args: argparse.Namespace, name: str):
-    from .estimators import Strategy
+    from .strategy import Strategy
 
     try:
         return Strategy(name, args.heuristic, args.light_samples, args.bsdf_samples,
@@ -247,10 +247,15 @@ def _exr_path(text: str) -> Path:
 def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, exposure: float,
             half: bool = False) -> int:
     """Write the EXR and PNG of a render, report it on stderr, and return the exit status."""
+    from .imagefiles import write_exr, write_png
+
     film = result.film
     png = output.with_suffix(".png")
-    film.write_exr(output, half=half)
-    film.write_png(png, exposure)
+    if result.interrupted and result.samples == 0:
+        print("tracer: interrupted before any sample was rendered: nothing written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    write_exr(output, film, half=half)
+    write_png(png, film.image(), exposure)
     if result.nonfinite:
         print(f"tracer: warning: {result.nonfinite} samples were NaN or infinite and were set to 0",
               file=sys.stderr)
@@ -266,7 +271,7 @@ def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, 
 
 def cmd_render(args: argparse.Namespace) -> int:
     from . import scene as scene_mod
-    from .render import RenderSettings, render, render_attributes
+    from .render_loop import RenderSettings, render
 
     scene_path = Path(args.scene) if args.scene else scene_mod.default_scene_path()
     scene = scene_mod.load_scene(scene_path, args.width, args.height)
@@ -276,72 +281,66 @@ def cmd_render(args: argparse.Namespace) -> int:
     output = _exr_path(args.output or f"{scene.name}_{strategy.name}.exr")
     settings = RenderSettings(spp=spp, seed=args.seed, threads=args.threads)
     result = render(scene, strategy, settings, progress=not args.quiet)
-    result.film.attributes.update(render_attributes(scene, strategy, settings, result))
     return _finish(result, scene, strategy, output, spp, args.quiet, args.exposure)
 
 
 def cmd_reference(args: argparse.Namespace) -> int:
     from . import scene as scene_mod
-    from .film import Film, sample_range
-    from .render import RenderSettings, render, render_attributes
+    from .imagefiles import read_exr
+    from .render_loop import RenderSettings, render
 
     scene = scene_mod.load_scene(args.scene, args.width, args.height)
     strategy = _strategy_from(args, "mis")
     output = _exr_path(args.output or f"{scene.name}_reference.exr")
-    film, seed, first, seconds, earliest = None, args.seed, 0, 0.0, 0
+    film, seed, first = None, args.seed, 0
     if args.resume:
         if not output.is_file():
             raise InputError("--resume: no reference to resume", str(output))
-        film = Film.read_exr(output)
+        film = read_exr(output)
         if (film.width, film.height) != (scene.camera.width, scene.camera.height):
             raise InputError(f"--resume: the reference is {film.width}x{film.height}, the scene "
                              f"{scene.camera.width}x{scene.camera.height}", str(output))
-        if film.attributes.get("tracer:strategy") != "mis":
+        if film.record.strategy != "mis":
             raise InputError("--resume: not an MIS reference", str(output))
         # Same seed, later sample indices: fresh random numbers that never repeat earlier ones.
-        seed, first = int(film.attributes.get("tracer:seed", 0)), sample_range(film)[1]
-        earliest = sample_range(film)[0]
-        seconds = float(film.attributes.get("tracer:seconds", 0.0))
+        seed, first = film.record.seed or 0, film.sample_range()[1]
     settings = RenderSettings(spp=args.spp, seed=seed, threads=args.threads, first_sample=first)
     result = render(scene, strategy, settings, film=film, progress=not args.quiet)
-    result.film.attributes.update(render_attributes(scene, strategy, settings, result))
-    result.film.attributes["tracer:seconds"] = seconds + result.seconds
-    result.film.attributes["tracer:first_sample"] = earliest
     return _finish(result, scene, strategy, output, args.spp, args.quiet, args.exposure,
                    half=not args.float)
 
 
 def cmd_merge(args: argparse.Namespace) -> int:
-    from .film import Film, exr_is_half, merge_renders
+    from .film import merge_renders
+    from .imagefiles import exr_is_half, read_exr, write_exr, write_png
 
     output = _exr_path(args.output)
-    a, b = Film.read_exr(args.a), Film.read_exr(args.b)
+    a, b = read_exr(args.a), read_exr(args.b)
     if (a.width, a.height) != (b.width, b.height):
         raise InputError(f"cannot merge a {a.width}x{a.height} render with a {b.width}x{b.height} one",
                          args.b)
     merged = merge_renders(a, b)
     half = all(exr_is_half(p) for p in (args.a, args.b))
-    merged.write_exr(output, half=half)
-    merged.write_png(output.with_suffix(".png"), args.exposure)
+    write_exr(output, merged, half=half)
+    write_png(output.with_suffix(".png"), merged.image(), args.exposure)
     if not args.quiet:
         print(f"merged {a.spp} + {b.spp} spp -> {merged.spp} spp: {output}", file=sys.stderr)
     return 0
 
 
-
 def cmd_compare(args: argparse.Namespace) -> int:
-    from . import report
-    from .compare import ALLOCATIONS, Comparison
-    from .estimators import Strategy
-    from .film import Film
-    from .scene import STRATEGIES, load_scene
+    from .imagefiles import read_exr
+    from .scene import load_scene
+    from .strategy import STRATEGIES, Strategy
+    from .study import report
+    from .study.compare import ALLOCATIONS, Comparison
 
     names = [n.strip() for n in args.strategies.split(",") if n.strip()]
     unknown = [n for n in names if n not in STRATEGIES]
     if unknown or not names:
         raise InputError(f"--strategies: unknown strategy '{unknown[0] if unknown else ''}' "
                          f"(expected some of {', '.join(STRATEGIES)})", "command line")
-    reference = Film.read_exr(args.reference)
+    reference = read_exr(args.reference)
     scene = load_scene(args.scene, reference.width, reference.height)
     for x, y, w, h in args.crop or []:
         if x + w > reference.width or y + h > reference.height:
@@ -382,7 +381,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from .check import DEFAULT_BASELINE, format_table, run_check
+    from .study.check import DEFAULT_BASELINE, format_table, run_check
 
     baseline = Path(args.baseline) if args.baseline else DEFAULT_BASELINE
     result = run_check(baseline, update=args.update, out=Path(args.out), seed_offset=args.seed_offset,
@@ -400,13 +399,13 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_primer(args: argparse.Namespace) -> int:
-    from .primer import main as primer_main
+    from .study.primer import main as primer_main
 
     return primer_main(args.out, args.seed)
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
-    from .stability import Cell, expectations, format_table, run_suite
+    from .study.stability import Cell, expectations, format_table, run_suite
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():

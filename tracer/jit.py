@@ -13,9 +13,22 @@ The estimator runs loops over lanes in compiled code instead of ~100 whole-array
 
 Floating-point semantics stay IEEE (no ``fastmath``): results match numpy to rounding.
 
-numba keys a cached function to its own source file only, so a kernel that inlined a function
-from another module would survive an edit of that module, stale. tracer's cache entries are
-therefore keyed to the digest of all of tracer's sources: any edit recompiles everything.
+numba keys a cached function to its own source file only (a known limitation, stated in numba's
+user guide under the ``cache`` option, user/jit.rst, and in developer/caching.rst), so a kernel
+that inlined a function from another module would survive an edit of that module, stale.
+tracer's cache entries are therefore keyed to the digest of all of tracer's sources,
+subpackages included: any edit recompiles everything.
+
+numba offers no documented way to add files to a function's cache key. The one documented
+lever on locators, ``NUMBA_CACHE_LOCATOR_CLASSES`` (numba >= 0.62, reference/envvars.rst), is
+read from the environment for the whole process and replaces the locator list of every cached
+function, ours or not, so a library cannot use it without changing other numba users' caching.
+This module instead adds, ahead of numba's own locators, subclasses that claim only files
+inside this package; other functions fall through to numba's locators as before. That relies
+on numba internals (``CacheImpl._locator_classes``, ``_SourceFileBackedLocatorMixin``, the
+``from_function`` / ``get_source_stamp`` hooks), read in numba's source for every release from
+0.60 to 0.68; pyproject.toml pins numba to that range, and tests/test_jit_cache.py checks end to
+end that an edit of an inlined module in a subpackage recompiles its caller.
 """
 
 from __future__ import annotations
@@ -29,26 +42,45 @@ from numba import njit
 PACKAGE = Path(__file__).resolve().parent
 
 
+def _is_ours(py_file: str) -> bool:
+    """Whether a function's source file lies in this package or any of its subpackages."""
+    return PACKAGE in Path(py_file).resolve().parents
+
+
 @functools.lru_cache(maxsize=1)
 def source_digest() -> bytes:
-    """SHA-256 of every Python source file of the package, in name order."""
+    """SHA-256 of every Python source file under the package, subpackages included, taken in
+    order of relative path; each file's relative path goes into the digest with its bytes, so
+    moving or renaming a module changes it too. Computed once per process."""
     digest = hashlib.sha256()
-    for path in sorted(PACKAGE.glob("*.py")):
-        digest.update(path.name.encode())
-        digest.update(path.read_bytes())
+    files = sorted(
+        (path.relative_to(PACKAGE).as_posix(), path)
+        for path in PACKAGE.rglob("*.py")
+        if "__pycache__" not in path.relative_to(PACKAGE).parts
+    )
+    for name, path in files:
+        digest.update(name.encode() + b"\0")
+        digest.update(hashlib.sha256(path.read_bytes()).digest())
     return digest.digest()
 
 
 def _install_package_stamp() -> bool:
     """Put, ahead of numba's own cache locators, a copy of each source-file-backed one (in
-    numba's order, so ``NUMBA_CACHE_DIR`` still wins) that keys tracer's entries to
-    ``source_digest``. Idempotent. Returns False if this numba lacks the (private) locator API;
-    then nothing is cached. Setting ``NUMBA_CACHE_LOCATOR_CLASSES`` bypasses these locators."""
+    numba's order, so ``NUMBA_CACHE_DIR`` still wins) that accepts only functions defined under
+    the package and keys their entries to ``source_digest``. Functions of other packages fall
+    through to numba's locators untouched. Idempotent.
+
+    Returns False, and tracer then caches nothing (correct but slow), if this numba lacks the
+    internals used here, if the package is not a plain folder (a zip: no digest to take), or if
+    ``NUMBA_CACHE_LOCATOR_CLASSES`` is set when tracer is imported, since numba then consults
+    only the classes named there and tracer's entries would be keyed to one file each."""
     try:
-        from numba.core import caching
+        from numba.core import caching, config
     except ImportError:  # pragma: no cover - numba without its caching module
         return False
-    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    if getattr(config, "CACHE_LOCATOR_CLASSES", "") or not PACKAGE.is_dir():
+        return False
+    impl = getattr(caching, "CacheImpl", None)
     file_backed = getattr(caching, "_SourceFileBackedLocatorMixin", None)
     if impl is None or file_backed is None or not hasattr(impl, "_locator_classes"):
         return False
@@ -64,11 +96,13 @@ def _install_package_stamp() -> bool:
 
             @classmethod
             def from_function(cls, py_func, py_file):
-                if Path(py_file).resolve().parent != PACKAGE:
+                if not _is_ours(py_file):
                     return None
                 return super().from_function(py_func, py_file)
 
-        PackageStamped.__name__ = f"TracerStamped{base.__name__.lstrip('_')}"
+        PackageStamped.__name__ = PackageStamped.__qualname__ = (
+            f"TracerStamped{base.__name__.lstrip('_')}"
+        )
         return PackageStamped
 
     ours = [stamped(cls) for cls in impl._locator_classes if issubclass(cls, file_backed)]

@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 
 from .jit import jit
+from .strategy import HEURISTICS
 
-HEURISTICS = ("balance", "power", "max")
 BALANCE, POWER, MAX = 0, 1, 2  # codes of HEURISTICS for compiled code
 POWER_BETA = 2.0  # the power heuristic below squares: beta = 2 as in Veach's thesis
 

@@ -106,8 +106,8 @@ def ggx_visible_normal(wo, alpha: float, u0: float, u1: float):
     """A half vector h distributed as the GGX normals visible from local ``wo`` (wo.z > 0):
     density D_wo(h) = G1(wo) max(0, wo.h) D(h) / wo.z in solid angle (Heitz 2018, JCGT 7(4)).
 
-    Dupuy and Benyoub's spherical-cap form of Heitz's method (2023, "Sound and Fast Sampling of
-    Visible GGX Normals"): in the stretched configuration, where the microsurface is a unit
+    Dupuy and Benyoub's spherical-cap form of Heitz's method (2023, "Sampling Visible GGX Normals
+    with Spherical Caps", CGF 42(8)): in the stretched configuration, where the microsurface is a unit
     hemisphere, the visible normals are (a uniform point on the spherical cap z >= -v.z) + v,
     normalized, with v the stretched wo; unstretching gives h. Same distribution as Heitz's
     disk construction, with no basis to build.

@@ -29,6 +29,7 @@ the block mean is the sum of the sub-pixel variances over (downsample^2)^2.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import sys
@@ -38,18 +39,18 @@ from typing import Any
 
 import numpy as np
 
-from . import metrics
-from .atomic import write_text
-from .errors import InputError
-from .estimators import Strategy
-from .film import Film, exr_is_half
-from .render import RenderSettings, render
-from .scene import STRATEGIES, Scene, load_scene
+from ..atomic import write_text
+from ..errors import InputError
+from ..film import Film
+from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
+from ..render_loop import RenderSettings, render
+from ..scene import Scene, default_scene_path, load_scene
+from ..strategy import STRATEGIES, Strategy
+from . import metrics, statistics
+from .statistics import FAMILY_ALPHA
 
-FAMILY_ALPHA = 0.01
 PIXEL_PASS_SHARE = 0.9975  # Mitsuba 3's share of pixels that must pass the z-test
 DEFAULT_BASELINE = Path("renders") / "noise_baseline.json"
-SCENE_DIR = Path(__file__).resolve().parent / "scenes"
 
 
 @dataclass
@@ -178,8 +179,9 @@ def save_baseline(path: str | os.PathLike[str], entries: list[Entry]) -> None:
 
 
 def scene_path(entry: Entry, base: Path) -> Path:
-    """A shipped scene by name, else a path relative to the baseline file's folder."""
-    shipped = SCENE_DIR / f"{entry.scene}.toml"
+    """A shipped scene by name (beside the default scene), else a path relative to the baseline
+    file's folder."""
+    shipped = default_scene_path().parent / f"{entry.scene}.toml"
     return shipped if shipped.is_file() else base / entry.scene
 
 
@@ -209,7 +211,7 @@ def downsampled_reference(reference: Film, factor: int, half: bool) -> tuple[np.
 def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) -> Measurement:
     """Render the entry once per seed and measure it against its reference."""
     ref_path = base / (entry.reference or f"references/{entry.scene}.exr")
-    reference = Film.read_exr(ref_path)
+    reference = read_exr(ref_path)
     f = entry.downsample
     if f < 1 or reference.width % f or reference.height % f:
         raise InputError(
@@ -229,6 +231,11 @@ def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) ->
         variance.append(metrics.variance(result.film))
         pooled.merge(result.film)
         seconds += result.seconds
+    # The pool holds several seeds' samples: its record keeps the estimator and drops the seed
+    # and sample range, which no single seed describes.
+    pooled.record = dataclasses.replace(
+        result.film.record, seed=None, first_sample=None, next_sample=None, seconds=seconds
+    )
     return Measurement(
         np.array(relmse), np.array(variance), pooled, ref_mean, ref_var, ref_sample_var, scene, seconds
     )
@@ -258,8 +265,6 @@ def image_variance(m: Measurement) -> np.ndarray:
 
 def pixel_pvalues(m: Measurement) -> np.ndarray:
     """Two-sided per-pixel-channel p-values of the pooled image against the reference, (P, 3)."""
-    from scipy import stats
-
     diff = m.pooled.mean - m.reference_mean
     sd = np.sqrt(image_variance(m) + m.reference_var)
     scale = np.maximum(np.abs(m.reference_mean), 1e-6)
@@ -269,26 +274,21 @@ def pixel_pvalues(m: Measurement) -> np.ndarray:
         np.abs(diff) / np.where(sd > 0.0, sd, 1.0),
         np.where(np.abs(diff) <= 1e-5 * scale, 0.0, np.inf),
     )
-    return 2.0 * stats.norm.sf(z)
+    return statistics.two_sided_p(z)
 
 
 def image_mean_pvalue(m: Measurement) -> tuple[float, float]:
     """(z, two-sided p) of the image mean against the reference's, for the channel with the
-    largest |z|, p Sidak-combined over the 3 channels. Channels are tested separately because
-    one sample's R, G and B errors are almost perfectly correlated: pooling them as independent
-    would understate the standard error by up to sqrt(3)."""
-    from scipy import stats
-
-    z = metrics.image_mean_z(m.pooled.mean, image_variance(m), m.reference_mean, m.reference_var)
-    worst = int(np.argmax(np.abs(z)))
-    p_worst = 2.0 * stats.norm.sf(abs(z[worst]))
-    return float(z[worst]), float(1.0 - (1.0 - p_worst) ** 3)
+    largest |z|, p Sidak-combined over the 3 channels (``statistics``: channels are tested
+    apart because their errors are almost perfectly correlated)."""
+    z = statistics.image_mean_z(m.pooled.mean, image_variance(m), m.reference_mean, m.reference_var)
+    return statistics.worst_channel(z), statistics.worst_channel_p(z)
 
 
 def judge(entries: list[Entry], measurements: dict[str, Measurement]) -> list[Verdict]:
     """The verdicts of every entry, with the Sidak levels of the whole file."""
-    noise_level = metrics.sidak(FAMILY_ALPHA, 2 * len(entries))
-    mean_level = metrics.sidak(FAMILY_ALPHA, len(entries))
+    noise_level = statistics.sidak(FAMILY_ALPHA, 2 * len(entries))
+    mean_level = statistics.sidak(FAMILY_ALPHA, len(entries))
     verdicts = []
     for e in entries:
         m = measurements[e.name]
@@ -302,7 +302,7 @@ def judge(entries: list[Entry], measurements: dict[str, Measurement]) -> list[Ve
             verdicts.append(Verdict(e.name, measure_name, float(np.mean(values)), base, p, p >= noise_level))
         if e.pixel_test:
             pvalues = pixel_pvalues(m)
-            share = float(np.mean(pvalues > metrics.sidak(FAMILY_ALPHA, pvalues.size)))
+            share = float(np.mean(pvalues > statistics.sidak(FAMILY_ALPHA, pvalues.size)))
             verdicts.append(
                 Verdict(e.name, "pixels passing", share, PIXEL_PASS_SHARE, share, share >= PIXEL_PASS_SHARE)
             )
@@ -378,8 +378,6 @@ def write_failures(out: Path, entries: list[Entry], result: CheckResult) -> None
         m = result.measurements[e.name]
         folder = out / e.name.replace("/", "_")
         folder.mkdir(parents=True, exist_ok=True)
-        m.pooled.write_exr(folder / "image.exr")
-        m.pooled.write_png(folder / "image.png")
         reference = Film(
             m.pooled.width,
             m.pooled.height,
@@ -387,8 +385,9 @@ def write_failures(out: Path, entries: list[Entry], result: CheckResult) -> None
             m.reference_mean.copy(),
             np.zeros_like(m.reference_mean),
         )
-        reference.write_exr(folder / "reference.exr")
-        reference.write_png(folder / "reference.png")
+        for name, film in (("image", m.pooled), ("reference", reference)):
+            write_exr(folder / f"{name}.exr", film)
+            write_png(folder / f"{name}.png", film.image())
         shape = (m.pooled.height, m.pooled.width)
         rel = metrics.relative_squared_error(m.pooled.mean, m.reference_mean).mean(axis=1).reshape(shape)
         save_map(

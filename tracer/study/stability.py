@@ -1,11 +1,12 @@
 """The stability suite: every strategy on every case where some strategy is known to fail.
 
-Each case is a small scene (written to a temporary folder) looked at straight down: a receiver
-plate fills the view, lit by the light under test, which the camera never sees directly. For
-each strategy the suite measures relMSE against a high-spp MIS render of the same case, the
-bias z-score of the image mean per channel (worst channel), the count of NaN/Inf samples and
-the time. ``blind`` strategies cannot see the case's light at all (a point light for hemisphere
-and BSDF sampling, a mirror for light sampling): they must return exactly zero.
+Each case is a small scene file in ``cases/`` (its header says what failure it shows), looked
+at straight down: a receiver plate fills the view, lit by the light under test, which the
+camera never sees directly. For each strategy the suite measures relMSE against a high-spp MIS
+render of the same case, the bias z-score of the image mean per channel (worst channel), the
+count of NaN/Inf samples and the time. ``blind`` strategies cannot see the case's light at all
+(a point light for hemisphere and BSDF sampling, a mirror for light sampling): they must return
+exactly zero.
 
 The same module checks Veach's bound for the balance heuristic (thesis, theorem 9.2): among
 all estimators that take n_l light and n_b BSDF samples and combine them with weights that sum
@@ -18,261 +19,97 @@ jitter), so the per-point variance is exactly what the theorem bounds.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
-import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import metrics
-from .atomic import save_figure, write_text
-from .estimators import DirectLighting, Strategy
-from .film import Film
-from .render import RenderSettings, render
-from .scene import STRATEGIES, Scene, load_scene
+from ..atomic import save_figure, write_text
+from ..estimators import DirectLighting
+from ..film import Film
+from ..render_loop import RenderSettings, render
+from ..scene import Scene, load_scene
+from ..strategy import STRATEGIES, Strategy
+from . import metrics, statistics
 
 SIZE = 32
 SPP = 64
 REFERENCE_SPP = 1024
-
-CAMERA = """
-[camera]
-origin = {origin}
-target = [0.0, 0.0, 0.0]
-up = [0.0, 0.0, -1.0]
-fov = 40.0
-width = {size}
-height = {size}
-"""
-
-MATERIALS = """
-[materials.matte]
-type = "diffuse"
-reflectance = [0.6, 0.6, 0.6]
-[materials.mirror]
-type = "mirror"
-reflectance = [0.9, 0.9, 0.9]
-[materials.glossy]
-type = "roughconductor"
-alpha = 0.0001
-reflectance = [0.9, 0.9, 0.9]
-"""
-
-
-def _quad(origin, edge1, edge2, material: str | None = None, emission=None) -> str:
-    lines = [
-        "[[shapes]]",
-        'type = "quad"',
-        f"origin = {list(map(float, origin))}",
-        f"edge1 = {list(map(float, edge1))}",
-        f"edge2 = {list(map(float, edge2))}",
-    ]
-    if material:
-        lines.append(f'material = "{material}"')
-    if emission is not None:
-        lines.append(f"emission = {list(map(float, emission))}")
-    return "\n".join(lines) + "\n"
-
-
-def _receiver(material: str, scale: float = 1.0) -> str:
-    """A 2 x 2 plate at y = 0, front side up (edge1 x edge2 = +y)."""
-    s = scale
-    return _quad([-s, 0, -s], [0, 0, 2 * s], [2 * s, 0, 0], material=material)
-
-
-def _light_quad(center, size: float, emission: float, facing: str = "down") -> str:
-    """A square emitter centred at ``center``; ``down`` faces -y, ``up`` faces +y."""
-    c, h = np.asarray(center, dtype=float), size / 2
-    if facing == "down":
-        return _quad(c + [-h, 0, -h], [size, 0, 0], [0, 0, size], emission=[emission] * 3)
-    return _quad(c + [-h, 0, -h], [0, 0, size], [size, 0, 0], emission=[emission] * 3)
+CASE_DIR = Path(str(resources.files(__package__) / "cases"))  # the cases' scene files, shipped
 
 
 @dataclass
 class Case:
-    """A stability case: its scene text, the strategies blind to its light, the strategies whose
-    image mean is reliably normal at the suite's spp (checked for bias), and sample counts."""
+    """A stability case: its scene file, the strategies blind to its light, the strategies whose
+    image mean is reliably normal at the suite's spp (checked for bias), and sample counts.
+
+    scene : the scene file's name in ``cases/`` without ``.toml`` (None: the case's name);
+        cases that differ only in their sample counts share one.
+    size : the image's width and height in pixels (the file's own size is replaced).
+    veach : the technique Veach's bound is checked against: the one that handles this case
+        well, so that its variance is estimated reliably (the other one's is underestimated
+        where it almost never finds the light). None: not checked.
+    """
 
     name: str
     description: str
-    text: str
+    scene: str | None = None
     blind: tuple[str, ...] = ()
     testable: tuple[str, ...] = ("light", "mis")
     light_samples: int = 1
     bsdf_samples: int = 1
-    files: dict[str, str] = field(default_factory=dict)
-    # The technique Veach's bound is checked against: the one that handles this case well, so
-    # that its variance is estimated reliably (the other one's is underestimated where it
-    # almost never finds the light). None: not checked.
     veach: str | None = None
+    size: int = SIZE
+
+    @property
+    def path(self) -> Path:
+        return CASE_DIR / f"{self.scene or self.name}.toml"
 
     def strategy(self, name: str, heuristic: str = "power") -> Strategy:
         return Strategy(name, heuristic, self.light_samples, self.bsdf_samples)
 
 
-def _degenerate_ply(y: float, half: float, facing_down: bool) -> str:
-    """A square at height y (side 2 half) as two real triangles plus two zero-area ones (a
-    repeated vertex, three collinear vertices); front side down or up."""
-    h = half
-    faces = ["3 0 1 2", "3 0 2 3"] if facing_down else ["3 0 2 1", "3 0 3 2"]
-    faces += ["3 4 4 5", "3 0 4 2"]  # degenerate: a repeated index; 0, 4, 2 lie on one diagonal
-    return "\n".join(
-        [
-            "ply",
-            "format ascii 1.0",
-            "element vertex 6",
-            "property float x",
-            "property float y",
-            "property float z",
-            "element face 4",
-            "property list uchar int vertex_indices",
-            "end_header",
-            f"{-h} {y} {-h}",
-            f"{h} {y} {-h}",
-            f"{h} {y} {h}",
-            f"{-h} {y} {h}",
-            f"0 {y} 0",
-            f"{h / 2} {y} {h / 2}",
-            *faces,
-            "",
-        ]
-    )
-
-
 def cases(size: int = SIZE) -> list[Case]:
-    """The suite's cases (scene texts at ``size`` x ``size`` pixels)."""
-    cam = CAMERA.format(origin=[0.0, 1.0, 0.0], size=size)
-    base = cam + MATERIALS
-    matte = _receiver("matte")
+    """The suite's cases, rendered at ``size`` x ``size`` pixels."""
+    hemisphere = ("uniform", "cosine", "bsdf")  # the strategies that cannot hit a point light
     out = [
-        Case(
-            "tiny_light",
-            "sphere light of radius 1e-3",
-            base
-            + matte
-            + """
-[[shapes]]
-type = "sphere"
-center = [0.3, 1.2, 0.1]
-radius = 0.001
-subdivisions = 1
-emission = [400000.0, 400000.0, 400000.0]
-""",
-            testable=("light", "mis"),
-            veach="light",
-        ),
-        Case(
-            "big_light",
-            "an emitter filling most of the hemisphere",
-            base + matte + _light_quad([0, 1.05, 0], 30.0, 1.0),
-            testable=STRATEGIES,
-            veach="bsdf",
-        ),
-        Case(
-            "grazing_light",
-            "light arriving at grazing angles",
-            base + matte + _quad([1.5, 0.0, -1.0], [0, 0, 2.0], [0, 0.08, 0], emission=[40.0] * 3),
-            testable=("light", "mis", "bsdf", "cosine"),
-            veach="light",
-        ),
-        Case(
-            "light_behind",
-            "light behind the receiver (expected: black)",
-            base + matte + _light_quad([0, -0.5, 0], 1.0, 5.0, facing="up"),
-            testable=STRATEGIES,
-        ),
-        Case(
-            "point_light",
-            "a point light",
-            base
-            + matte
-            + """
-[[lights]]
-type = "point"
-position = [0.2, 0.8, 0.1]
-intensity = [1.0, 1.0, 1.0]
-""",
-            blind=("uniform", "cosine", "bsdf"),
-        ),
-        Case(
-            "mirror_small_light",
-            "ideal mirror under a small light",
-            base + _receiver("mirror") + _light_quad([0, 2.0, 0], 0.2, 50.0),
-            blind=("uniform", "cosine", "light"),
-            testable=("bsdf", "mis"),
-        ),
-        Case(
-            "mirror_large_light",
-            "ideal mirror under a large light",
-            base + _receiver("mirror") + _light_quad([0, 2.0, 0], 4.0, 1.0),
-            blind=("uniform", "cosine", "light"),
-            testable=("bsdf", "mis"),
-        ),
-        Case(
-            "ggx_1e-4_small_light",
-            "GGX alpha 1e-4 under a small light",
-            base + _receiver("glossy") + _light_quad([0, 2.0, 0], 0.2, 50.0),
-            testable=("bsdf", "mis"),
-        ),
-        Case(
-            "ggx_1e-4_large_light",
-            "GGX alpha 1e-4 under a large light",
-            base + _receiver("glossy") + _light_quad([0, 2.0, 0], 4.0, 1.0),
-            testable=("bsdf", "mis"),
-            veach="bsdf",
-        ),
-        Case(
-            "zero_area_triangles",
-            "emissive and receiving meshes with zero-area triangles",
-            base
-            + '[[shapes]]\ntype = "mesh"\nfile = "light.ply"\nemission = [20.0, 20.0, 20.0]\n'
-            + '[[shapes]]\ntype = "mesh"\nfile = "receiver.ply"\nmaterial = "matte"\n',
-            files={
-                "light.ply": _degenerate_ply(1.5, 0.2, True),
-                "receiver.ply": _degenerate_ply(0.0, 1.0, False),
-            },
-            testable=("light", "mis", "bsdf", "cosine"),
-            veach="light",
-        ),
+        Case("tiny_light", "sphere light of radius 1e-3", veach="light"),
+        Case("big_light", "an emitter filling most of the hemisphere",
+             testable=STRATEGIES, veach="bsdf"),
+        Case("grazing_light", "light arriving at grazing angles",
+             testable=("light", "mis", "bsdf", "cosine"), veach="light"),
+        Case("light_behind", "light behind the receiver (expected: black)",
+             testable=STRATEGIES),
+        Case("point_light", "a point light", blind=hemisphere),
+        Case("mirror_small_light", "ideal mirror under a small light",
+             blind=("uniform", "cosine", "light"), testable=("bsdf", "mis")),
+        Case("mirror_large_light", "ideal mirror under a large light",
+             blind=("uniform", "cosine", "light"), testable=("bsdf", "mis")),
+        Case("ggx_1e-4_small_light", "GGX alpha 1e-4 under a small light",
+             testable=("bsdf", "mis")),
+        Case("ggx_1e-4_large_light", "GGX alpha 1e-4 under a large light",
+             testable=("bsdf", "mis"), veach="bsdf"),
+        Case("zero_area_triangles", "emissive and receiving meshes with zero-area triangles",
+             testable=("light", "mis", "bsdf", "cosine"), veach="light"),
     ]
-    for scale in (1e-3, 1e3):
-        text = CAMERA.format(origin=[0.0, scale, 0.0], size=size) + MATERIALS + _receiver("matte", scale)
-        text += _light_quad([0, 1.5 * scale, 0], 0.4 * scale, 20.0)
-        out.append(
-            Case(
-                f"scaled_{scale:g}",
-                f"a small quad light, every length x {scale:g}",
-                text,
-                testable=("light", "mis"),
-            )
-        )
-    point = (
-        base + matte + '[[lights]]\ntype = "point"\nposition = [0.2, 0.8, 0.1]\nintensity = [1.0, 1.0, 1.0]\n'
-    )
+    for scale in ("0.001", "1000"):
+        out.append(Case(f"scaled_{scale}", f"a small quad light, every length x {scale}"))
     for n_light, n_bsdf in ((4, 1), (1, 4), (4, 4)):
-        out.append(
-            Case(
-                f"point_light_{n_light}l_{n_bsdf}b",
-                f"point light, {n_light} light + {n_bsdf} BSDF samples (must not brighten)",
-                point,
-                blind=("uniform", "cosine", "bsdf"),
-                light_samples=n_light,
-                bsdf_samples=n_bsdf,
-            )
-        )
-    return out
+        out.append(Case(f"point_light_{n_light}l_{n_bsdf}b",
+                        f"point light, {n_light} light + {n_bsdf} BSDF samples (must not brighten)",
+                        scene="point_light", blind=hemisphere, light_samples=n_light, bsdf_samples=n_bsdf))
+    return [dataclasses.replace(c, size=size) for c in out]
 
 
-def load_case(case: Case, folder: Path) -> Scene:
-    path = folder / f"{case.name}.toml"
-    path.write_text(case.text)
-    for name, content in case.files.items():
-        (folder / name).write_text(content)
-    return load_scene(path)
+def load_case(case: Case) -> Scene:
+    """The case's scene at ``case.size`` x ``case.size`` pixels."""
+    return load_scene(case.path, width=case.size, height=case.size)
 
 
 @dataclass
@@ -294,8 +131,9 @@ class Cell:
 
 def _image_mean_z(film: Film, reference: Film) -> float:
     """Worst-channel z of the image mean against the reference's."""
-    z = metrics.image_mean_z(film.mean, film.variance_of_mean(), reference.mean, reference.variance_of_mean())
-    return float(z[np.argmax(np.abs(z))])
+    z = statistics.image_mean_z(film.mean, film.variance_of_mean(), reference.mean,
+                                reference.variance_of_mean())
+    return statistics.worst_channel(z)
 
 
 def run_case(
@@ -345,9 +183,10 @@ def veach_bound(
     the estimates' own error.
     """
     cam = scene.camera
-    pixel = np.arange(cam.width * cam.height)
+    pixel = np.arange(cam.width * cam.height, dtype=np.int64)
     step = max(1, len(pixel) // (size * size))
     pixel = np.repeat(pixel[::step][: size * size], samples)
+    sample = np.tile(np.arange(samples, dtype=np.int64), len(pixel) // samples)
     origins, dirs = cam.rays(pixel, np.full((len(pixel), 2), 0.5))
     out: dict[str, Any] = {}
     mu2 = None
@@ -356,7 +195,10 @@ def veach_bound(
         ("light", Strategy("light")),
         ("bsdf", Strategy("bsdf")),
     ):
-        radiance = DirectLighting(scene, strategy).radiance(origins, dirs, np.random.default_rng(seed))
+        # Sample index k of each pixel (the pixel's k-th copy): independent samples per point,
+        # the same numbers for the three estimators.
+        radiance = DirectLighting(scene, strategy).radiance(origins, dirs, seed=seed, pixel=pixel,
+                                                            sample=sample)
         values = radiance.reshape(-1, samples, 3)
         var = values.var(axis=1, ddof=1)  # (points, 3)
         # Standard error of a sample variance: sqrt((m4 - s^4 (n-3)/(n-1)) / n).
@@ -384,14 +226,13 @@ def run_suite(
     stream = stream if stream is not None else sys.stderr
     cells: list[Cell] = []
     veach: dict[str, dict[str, Any]] = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        for case in cases(size):
-            start = time.perf_counter()
-            scene = load_case(case, Path(tmp))
-            cells += run_case(case, scene, spp, seed, threads, reference_spp)
-            if case.veach:
-                veach[case.name] = veach_bound(case, scene, seed=seed)
-            print(f"  {case.name}: {time.perf_counter() - start:.1f} s", file=stream)
+    for case in cases(size):
+        start = time.perf_counter()
+        scene = load_case(case)
+        cells += run_case(case, scene, spp, seed, threads, reference_spp)
+        if case.veach:
+            veach[case.name] = veach_bound(case, scene, seed=seed)
+        print(f"  {case.name}: {time.perf_counter() - start:.1f} s", file=stream)
     doc = {
         "spp": spp,
         "size": size,
@@ -417,8 +258,6 @@ def expectations(doc: dict[str, Any], alpha: float = 0.01) -> list[str]:
     - Veach's bound holds, up to a one-sided normal bound on the variance estimates' error
       (Sidak over the cases checked).
     """
-    from scipy import stats
-
     cells = [Cell(**c) if isinstance(c, dict) else c for c in doc["cells"]]
     problems = []
     for c in cells:
@@ -427,12 +266,12 @@ def expectations(doc: dict[str, Any], alpha: float = 0.01) -> list[str]:
         if c.blind and not c.zero:
             problems.append(f"{c.case}/{c.strategy}: blind to the light but not zero")
     testable = [c for c in cells if c.testable]
-    z_crit = stats.norm.isf(metrics.sidak(alpha, len(testable)) / 2.0)
+    z_crit = statistics.z_critical(alpha, len(testable))
     for c in testable:
         if not abs(c.z) <= z_crit:
             problems.append(f"{c.case}/{c.strategy}: biased, image mean z = {c.z:+.2f} (bound {z_crit:.2f})")
     bounds = doc.get("veach_bound", {})
-    z_veach = stats.norm.isf(metrics.sidak(alpha, len(bounds)))
+    z_veach = statistics.z_critical(alpha, len(bounds), sides=1)
     for name, b in bounds.items():
         best = b["technique"]
         excess = b["mis_balance"] - (b[best] + b["slack"])

@@ -1,4 +1,4 @@
-"""Noise and error measures, one definition everywhere (``DESIGN.md``).
+"""Noise and error measures, one definition everywhere (``docs/DESIGN.md``).
 
 Images are ``(..., 3)`` float arrays of pixel means; the reference R is a high-spp MIS render.
 
@@ -7,18 +7,21 @@ Images are ``(..., 3)`` float arrays of pixel means; the reference R is a high-s
 - ``variance`` = mean over pixels and channels of the variance of the pixel value
   (the film's per-sample variance / spp): the error expected without a reference
 - ``efficiency`` = 1 / (relmse x seconds): higher is better at equal time
+
+Significance levels and z-tests are ``tracer.study.statistics``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .film import Film
+from ..film import Film
 
 RELMSE_EPSILON = 0.01
 
 
 def mse(image: np.ndarray, reference: np.ndarray) -> float:
+    """Mean over pixels and channels of (I - R)^2; ``image`` and ``reference`` of one shape."""
     return float(np.mean((image - reference) ** 2))
 
 
@@ -28,33 +31,13 @@ def relative_squared_error(image: np.ndarray, reference: np.ndarray) -> np.ndarr
 
 
 def relmse(image: np.ndarray, reference: np.ndarray) -> float:
+    """Mean over pixels and channels of :func:`relative_squared_error`."""
     return float(np.mean(relative_squared_error(image, reference)))
 
 
 def variance(film: Film) -> float:
     """Mean over pixels and channels of the variance of the pixel value."""
     return float(np.mean(film.variance_of_mean()))
-
-
-def sidak(alpha: float, m: int) -> float:
-    """Per-test level for m tests with a family-wise false-alarm rate alpha (Sidak)."""
-    return 1.0 - (1.0 - alpha) ** (1.0 / max(m, 1))
-
-
-def image_mean_z(
-    mean: np.ndarray, var_of_mean: np.ndarray, ref_mean: np.ndarray, ref_var_of_mean: np.ndarray
-) -> np.ndarray:
-    """Per-channel z-scores ``(3,)`` of an image mean against a reference's.
-
-    Inputs are ``(P, 3)`` pixel means and variances of the pixel means. Pixels are independent,
-    so Var(image mean) = sum of pixel variances / P^2; channels are kept apart because one
-    sample's R, G and B errors are almost perfectly correlated. Where both variances vanish,
-    z is 0 for equal means and infinite otherwise.
-    """
-    p = len(mean)
-    diff = mean.mean(axis=0) - ref_mean.mean(axis=0)
-    sd = np.sqrt((var_of_mean.sum(axis=0) + ref_var_of_mean.sum(axis=0)) / p**2)
-    return np.where(sd > 0, diff / np.where(sd > 0, sd, 1.0), np.where(np.abs(diff) < 1e-12, 0.0, np.inf))
 
 
 def efficiency(relmse_value: float, seconds: float) -> float:

@@ -35,8 +35,8 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from .atomic import save_figure
-from .errors import InputError
+from ..atomic import save_figure
+from ..errors import InputError
 
 SQRT3 = math.sqrt(3.0)
 AGREE_SE = 3.0  # the tables call |z| < 3 agreement

@@ -2,7 +2,9 @@
 
 This module renders and measures; ``report.py`` turns the results into files. Render time
 is the wall time of ``render()`` alone: the Embree scene is built once and shared, so every
-strategy pays the same setup and none is charged for it.
+strategy pays the same setup and none is charged for it. Each run's film carries the render
+record that ``render()`` sets (strategy, seed, sample range, seconds), which the report writes
+into the run's EXR header.
 """
 
 from __future__ import annotations
@@ -12,12 +14,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..embree import RayCaster
+from ..estimators import DirectLighting
+from ..film import Film
+from ..render_loop import RenderSettings, render
+from ..scene import Scene
+from ..strategy import Strategy
 from . import metrics
-from .embree import RayCaster
-from .estimators import DirectLighting, Strategy
-from .film import Film
-from .render import RenderSettings, render
-from .scene import Scene
 
 # (light, bsdf) samples per camera sample for the MIS allocation sweep: ratios 1:0 ... 0:1.
 ALLOCATIONS = ((4, 0), (3, 1), (2, 2), (1, 3), (0, 4))

@@ -15,10 +15,11 @@ from typing import Any
 
 import numpy as np
 
+from ..atomic import save_figure, write_text
+from ..film import Film
+from ..imagefiles import to_srgb8, write_exr, write_png
 from . import metrics
-from .atomic import save_figure, write_text
 from .compare import Run, fit_convergence, run_row, time_to_reach
-from .film import Film, to_srgb8, write_png
 
 RELERR_RANGE = (-5.0, 1.0)  # log10 of per-pixel relative squared error shown in the maps
 RATIO_RANGE = 4.0  # log2 efficiency ratio shown from -4 to 4 (16x either way)
@@ -317,8 +318,8 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
     results, relerr_files, flip_files = [], [], []
     for run in runs:
         name = run_name(run)
-        run.film.write_exr(out / f"{name}.exr")
-        run.film.write_png(out / f"{name}.png", exposure)
+        write_exr(out / f"{name}.exr", run.film)  # the header carries the record render() set
+        write_png(out / f"{name}.png", run.film.image(), exposure)
         relerr_map(run, reference, out / f"{name}_relerr.png")
         flip = flip_map(run, reference, out / f"{name}_flip.png")
         relerr_files.append(f"{name}_relerr.png")

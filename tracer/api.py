@@ -1,0 +1,120 @@
+"""The Python API: load a scene, render it with a strategy, get arrays back, measure the error.
+
+    import tracer
+    scene = tracer.load_scene("scenes/cornell.toml", width=64, height=64)
+    image = tracer.render(scene, strategy="mis", spp=16, seed=1)
+    image.mean.shape        # (64, 64, 3) float64 pixel values (linear RGB radiance)
+    image.variance_of_mean  # (64, 64, 3) their estimated variance
+    reference = tracer.render(scene, strategy="mis", spp=256, seed=2)
+    tracer.compare(image, reference)   # {'mse': ..., 'relmse': ..., 'variance': ..., ...}
+
+Everything here calls the same code as the command line: ``tracer render`` is
+:func:`render` followed by :meth:`Image.write`.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .film import Film
+from .scene import Scene, load_scene
+from .strategy import Strategy
+
+__all__ = ["Image", "Scene", "Strategy", "compare", "load_scene", "read_image", "render"]
+
+
+@dataclass
+class Image:
+    """A rendered image and its per-pixel statistics.
+
+    mean : (H, W, 3) float64 pixel values: linear RGB radiance, the mean of each pixel's samples.
+    variance : (H, W, 3) float64 unbiased variance of one sample's estimate per pixel.
+    variance_of_mean : (H, W, 3) float64 variance of the pixel value (variance / count).
+    count : (H, W) int64 samples per pixel.   spp : the smallest count.
+    seconds : render wall time.   nonfinite : samples that came out NaN or infinite (set to 0).
+    interrupted : Ctrl-C stopped the render early.   film : the underlying statistics, with
+    the render record (``tracer.record``) that the EXR header stores.
+    """
+
+    mean: np.ndarray
+    variance: np.ndarray
+    variance_of_mean: np.ndarray
+    count: np.ndarray
+    spp: int
+    seconds: float
+    nonfinite: int
+    interrupted: bool
+    film: Film
+
+    @classmethod
+    def of_film(cls, film: Film, seconds: float | None = None, nonfinite: int = 0,
+                interrupted: bool = False) -> "Image":
+        shape = (film.height, film.width, 3)
+        return cls(film.image(), film.variance().reshape(shape), film.variance_of_mean().reshape(shape),
+                   film.count.reshape(film.height, film.width), film.spp,
+                   film.record.seconds or 0.0 if seconds is None else seconds, nonfinite, interrupted, film)
+
+    def write(self, path: str | os.PathLike[str], exposure: float = 0.0, half: bool = False) -> None:
+        """Write the EXR (mean, variance, render record) to ``path`` and a PNG preview beside it
+        (same stem, ``exposure`` in stops)."""
+        from pathlib import Path
+
+        from .imagefiles import write_exr, write_png
+
+        write_exr(path, self.film, half=half)
+        write_png(Path(path).with_suffix(".png"), self.mean, exposure)
+
+
+def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str | Strategy = "mis",
+           spp: int = 64, seed: int = 0, *, threads: int | None = None, heuristic: str = "power",
+           light_samples: int = 1, bsdf_samples: int = 1, one_sample: bool = False,
+           light_selection: str = "power", sampler: str = "independent", progress: bool = False) -> Image:
+    """Render ``scene`` (a :class:`Scene`, or a path or dict for :func:`load_scene`) with
+    ``spp`` samples per pixel.
+
+    strategy : ``uniform``, ``cosine``, ``bsdf``, ``light`` or ``mis``, or a :class:`Strategy`
+        (then the keyword options heuristic ... light_selection are ignored).
+    seed : the same seed gives the same bits whatever ``threads`` (default: all cores).
+    Raises ``ValueError`` for a bad option and ``tracer.errors.InputError`` for a bad scene.
+    """
+    from .render_loop import RenderSettings
+    from .render_loop import render as render_film
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    if not isinstance(strategy, Strategy):
+        strategy = Strategy(strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection)
+    if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
+        raise ValueError(f"spp must be a whole number >= 1, got {spp!r}")
+    settings = RenderSettings(spp=int(spp), seed=int(seed), threads=threads or os.cpu_count() or 1,
+                              sampler=sampler)
+    result = render_film(scene, strategy, settings, progress=progress)
+    return Image.of_film(result.film, result.seconds, result.nonfinite, result.interrupted)
+
+
+def read_image(path: str | os.PathLike[str]) -> Image:
+    """Read a render EXR (``tracer render``, ``tracer reference``) as an :class:`Image`."""
+    from .imagefiles import read_exr
+
+    return Image.of_film(read_exr(path))
+
+
+def compare(image: Image, reference: Image, seconds: float | None = None) -> dict[str, float]:
+    """The noise measures of ``image`` against ``reference`` (same resolution), as ``tracer
+    compare`` reports them: ``mse`` = mean (I - R)^2, ``relmse`` = mean (I - R)^2 / (R^2 + 0.01),
+    ``variance`` = mean variance of the pixel value, ``efficiency`` = 1 / (relmse x seconds)
+    (seconds: the image's own unless given)."""
+    from .study import metrics
+
+    if image.mean.shape != reference.mean.shape:
+        raise ValueError(f"image {image.mean.shape[:2]} and reference {reference.mean.shape[:2]} "
+                         "differ in size")
+    relmse = metrics.relmse(image.mean, reference.mean)
+    seconds = image.seconds if seconds is None else seconds
+    return {"mse": metrics.mse(image.mean, reference.mean), "relmse": relmse,
+            "variance": float(np.mean(image.variance_of_mean)),
+            "efficiency": metrics.efficiency(relmse, seconds)}

@@ -1,0 +1,149 @@
+"""Image files: the render EXR contract and 8-bit PNG previews, through OpenImageIO.
+
+The EXR (``docs/DESIGN.md``, "The render file"): channels ``R,G,B`` = pixel mean and
+``variance.R/G/B`` = unbiased variance of a single sample's estimate (the variance of the
+pixel value is that / spp), float32 (or half means for references), zip compression; the
+header holds ``tracer:spp`` and the render record (``tracer.record``). If the counts differ
+between pixels (a render interrupted mid-pass), a seventh channel ``samples`` holds each
+pixel's count and ``tracer:spp`` is the smallest count. Channels are looked up by name on read
+(EXR reorders them).
+
+Every write is atomic (``tracer.atomic``) and checked: an error from OpenImageIO, also at
+close, raises ``InputError`` and leaves any existing file as it was.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from .atomic import atomic_write
+from .errors import InputError
+from .film import Film
+from .record import RenderRecord
+
+CHANNELS = ("R", "G", "B", "variance.R", "variance.G", "variance.B")
+COUNT_CHANNEL = "samples"
+SPP_ATTRIBUTE = "tracer:spp"
+
+
+def write_exr(path: str | os.PathLike[str], film: Film, half: bool = False) -> None:
+    """Write ``film`` and its record as a render EXR, atomically.
+
+    ``half`` stores the means as 16-bit floats (3 significant digits), for references whose own
+    error is far below what they are compared with; variances stay 32-bit.
+    """
+    import OpenImageIO as oiio
+
+    names = list(CHANNELS) + ([] if film.uniform else [COUNT_CHANNEL])
+    planes = [film.mean, film.variance()]
+    if not film.uniform:
+        planes.append(film.count[:, None].astype(np.float64))
+    pixels = np.ascontiguousarray(np.concatenate(planes, axis=1), dtype=np.float32)
+    pixels = pixels.reshape(film.height, film.width, -1)
+    spec = oiio.ImageSpec(film.width, film.height, len(names), "half" if half else "float")
+    spec.channelnames = tuple(names)
+    if half:
+        # Half floats only for the means: variances of bright, small emitters exceed the
+        # half range (65504) and would read back as inf.
+        spec.channelformats = (oiio.TypeDesc("half"),) * 3 + (oiio.TypeDesc("float"),) * (len(names) - 3)
+    spec.attribute("compression", "zip")
+    spec.attribute(SPP_ATTRIBUTE, int(film.spp))
+    for key, value in film.record.attributes().items():
+        spec.attribute(key, value)
+    atomic_write(path, lambda tmp: _write(tmp, spec, pixels))
+
+
+def read_exr(path: str | os.PathLike[str]) -> Film:
+    """Read a render EXR (written by :func:`write_exr`, or any EXR with its six channels) into a
+    film whose record is the header's."""
+    import OpenImageIO as oiio
+
+    path = str(path)
+    if not os.path.isfile(path):
+        raise InputError("no such file", path)
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise InputError(f"cannot read image: {oiio.geterror()}", path)
+    try:
+        spec = inp.spec()
+        data = inp.read_image(0, 0, 0, spec.nchannels, "float")
+    finally:
+        inp.close()
+    if data is None:
+        raise InputError("cannot read image data", path)
+    names = list(spec.channelnames)
+    missing = [c for c in CHANNELS if c not in names]
+    if missing:
+        raise InputError(f"missing channel(s) {', '.join(missing)} (has {', '.join(names)})", path)
+    data = np.asarray(data, dtype=np.float64).reshape(spec.height * spec.width, spec.nchannels)
+    attributes = {a.name: a.value for a in spec.extra_attribs if a.name.startswith("tracer:")}
+    try:
+        record = RenderRecord.from_attributes(attributes)
+        spp = int(attributes.get(SPP_ATTRIBUTE, 0))
+    except (InputError, ValueError, TypeError) as exc:
+        raise InputError(str(exc), path) from None
+    if COUNT_CHANNEL in names:
+        count = np.rint(data[:, names.index(COUNT_CHANNEL)]).astype(np.int64)
+    else:
+        count = np.full(spec.height * spec.width, spp, dtype=np.int64)
+    mean = np.ascontiguousarray(data[:, [names.index(c) for c in CHANNELS[:3]]])
+    var = np.ascontiguousarray(data[:, [names.index(c) for c in CHANNELS[3:]]])
+    m2 = var * np.maximum(count - 1, 0)[:, None]
+    return Film(spec.width, spec.height, count, mean, m2, record)
+
+
+def exr_is_half(path: str | os.PathLike[str]) -> bool:
+    """Whether an EXR stores its means (R, G, B) as 16-bit floats (merges of half references stay half)."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise InputError(f"cannot read image: {oiio.geterror()}", str(path))
+    try:
+        spec = inp.spec()
+        formats = list(spec.channelformats) or [spec.format] * spec.nchannels
+        return formats[list(spec.channelnames).index("R")] == oiio.HALF
+    finally:
+        inp.close()
+
+
+def to_srgb8(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """Linear RGB ``(H, W, 3)`` -> 8-bit sRGB: exposure (stops), the sRGB curve, rounding."""
+    x = np.clip(np.nan_to_num(image * 2.0**exposure, nan=0.0), 0.0, 1.0)
+    # sRGB transfer function (IEC 61966-2-1).
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return np.rint(srgb * 255.0).astype(np.uint8)
+
+
+def write_png(path: str | os.PathLike[str], image: np.ndarray, exposure: float = 0.0,
+              srgb: bool = False) -> None:
+    """Write ``image (H, W, 3)`` as an 8-bit PNG, atomically: linear RGB through
+    :func:`to_srgb8`, or, with ``srgb``, values already display-encoded in [0, 1]."""
+    import OpenImageIO as oiio
+
+    if srgb:
+        pixels = np.rint(np.clip(image, 0.0, 1.0) * 255.0).astype(np.uint8)
+    else:
+        pixels = to_srgb8(image, exposure)
+    pixels = np.ascontiguousarray(pixels)
+    spec = oiio.ImageSpec(image.shape[1], image.shape[0], pixels.shape[2], "uint8")
+    atomic_write(path, lambda tmp: _write(tmp, spec, pixels))
+
+
+def _write(path: str, spec: Any, pixels: np.ndarray) -> None:
+    """Write ``pixels`` with ``spec`` to ``path``; any error, at open, write or close, raises."""
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(path)
+    if out is None:
+        raise InputError(f"cannot write images of this type: {oiio.geterror()}", path)
+    ok = out.open(path, spec) and out.write_image(pixels)
+    error = out.geterror()
+    closed = out.close()
+    if not ok:
+        raise InputError(f"cannot write: {error}", path)
+    if not closed:
+        raise InputError(f"cannot write: {out.geterror() or 'error while closing the file'}", path)

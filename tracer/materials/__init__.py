@@ -1,0 +1,188 @@
+"""Materials behind one interface (``base.py`` says what a material type declares).
+
+One module per material type, one registry (``TYPES``) and one dispatch on the material code
+(:func:`eval_pdf`, :func:`sample`), in the manner of pbrt-v4's BxDFs:
+
+================  ====  ==============================================================
+type              code  module
+================  ====  ==============================================================
+(none)            0     black: shapes without a material reflect nothing
+diffuse           1     ``diffuse.py``: Lambertian
+roughconductor    2     ``roughconductor.py``: GGX microfacet reflector, Fresnel = 1
+mirror            3     ``mirror.py``: ideal specular reflection (delta)
+================  ====  ==============================================================
+
+Adding a material: a module with ``TYPE``, ``eval_pdf`` and ``sample``; its ``TYPE`` in
+``TYPES`` below; a branch in :func:`eval_pdf` and :func:`sample`. The scene reader reads its
+parameters from ``TYPE.params``; ``tests/test_sampling.py`` checks the interface's contract
+(sample weight = f cos / pdf, sample pdf = pdf) on every type in ``TYPES``, and a new type adds
+its own chi-square test there.
+
+The batch API (:class:`Materials`) runs the same compiled code over arrays of lanes, for tests
+and tools.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..jit import jit
+from . import diffuse, mirror, roughconductor
+from .base import DELTA, DIFFUSE, GLOSSY, MaterialTable, MaterialType, Param
+
+NONE = 0  # the code of the black material
+TYPES: dict[str, MaterialType] = {t.name: t for t in (diffuse.TYPE, roughconductor.TYPE, mirror.TYPE)}
+_BY_CODE = {t.code: t for t in TYPES.values()}
+assert len(_BY_CODE) == len(TYPES) and NONE not in _BY_CODE, "material codes must be unique and > 0"
+
+
+@jit
+def eval_pdf(kind: int, params, row: int, wo, wi):
+    """``(f, pdf)`` of the material in ``row`` (code ``kind``): RGB f(wo, wi) without the
+    cosine and the solid-angle pdf of sampling wi (``base.py``). 0 for the black material."""
+    if kind == diffuse.CODE:
+        return diffuse.eval_pdf(params, row, wo, wi)
+    if kind == roughconductor.CODE:
+        return roughconductor.eval_pdf(params, row, wo, wi)
+    if kind == mirror.CODE:
+        return mirror.eval_pdf(params, row, wo, wi)
+    return (0.0, 0.0, 0.0), 0.0
+
+
+@jit
+def sample(kind: int, params, row: int, wo, u0: float, u1: float):
+    """``(wi, weight, pdf, flags)`` sampled from the material in ``row`` (``base.py``)."""
+    if kind == diffuse.CODE:
+        return diffuse.sample(params, row, wo, u0, u1)
+    if kind == roughconductor.CODE:
+        return roughconductor.sample(params, row, wo, u0, u1)
+    if kind == mirror.CODE:
+        return mirror.sample(params, row, wo, u0, u1)
+    return (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0
+
+
+def table(materials: list[tuple[str, str, dict[str, object]]]) -> MaterialTable:
+    """A material table from ``(name, type name, parameters by name)`` triples; row 0 is the
+    black material, so the i-th triple is row i + 1."""
+    rows = [np.zeros(0)]
+    kinds = [NONE]
+    for _, type_name, values in materials:
+        kind = TYPES[type_name]
+        rows.append(kind.row(values))
+        kinds.append(kind.code)
+    width = max(len(r) for r in rows)
+    params = np.zeros((len(rows), max(width, 1)))
+    for i, r in enumerate(rows):
+        params[i, : len(r)] = r
+    return MaterialTable(np.asarray(kinds, dtype=np.int8), params, ["(none)"] + [m[0] for m in materials])
+
+
+def lobes(kind: int) -> int:
+    """The lobe flags of material code ``kind`` (0 for the black material)."""
+    return _BY_CODE[kind].lobes if kind in _BY_CODE else 0
+
+
+@dataclass
+class MaterialSample:
+    """Result of :meth:`Materials.sample`; every field has one row per lane.
+
+    wi : (n, 3) local unit direction toward the light.
+    weight : (n, 3) f |cos theta_i| / pdf, or the lobe's reflectance for a delta sample; 0 if invalid.
+    pdf : (n,) solid-angle pdf of ``wi``; 0 for delta samples and invalid ones.
+    flags : (n,) int lobe flags of the sampled lobe (0 if invalid).
+    """
+
+    wi: np.ndarray
+    weight: np.ndarray
+    pdf: np.ndarray
+    flags: np.ndarray
+
+    @property
+    def delta(self) -> np.ndarray:
+        return (self.flags & DELTA) != 0
+
+
+@dataclass
+class Materials:
+    """Per-lane materials for batch evaluation: lane i has material row ``row[i]`` of ``table``.
+    All directions are local ``(n, 3)`` arrays."""
+
+    table: MaterialTable
+    row: np.ndarray
+
+    @classmethod
+    def uniform(cls, type_name: str, n: int, **values) -> "Materials":
+        """n lanes of one material of type ``type_name`` with parameters ``values``."""
+        return cls(table([("m", type_name, values)]), np.ones(n, dtype=np.int64))
+
+    @classmethod
+    def per_lane(cls, type_names, values: dict[str, np.ndarray]) -> "Materials":
+        """Lane i: a material of type ``type_names[i]`` (a sequence, or one name for all lanes)
+        with parameters ``values[name][i]`` (``(n,)`` or ``(n, 3)`` arrays; a parameter that a
+        lane's type does not have is ignored)."""
+        n = len(next(iter(values.values())))
+        names = np.broadcast_to(np.asarray(type_names, dtype=object), (n,))
+        params = np.zeros((n + 1, max([t.width for t in TYPES.values()])))
+        kind = np.zeros(n + 1, dtype=np.int8)
+        for type_name in set(names.tolist()):
+            t = TYPES[type_name]
+            lanes = 1 + np.flatnonzero(names == type_name)
+            kind[lanes] = t.code
+            for p in t.params:
+                column = t.column(p.name)
+                given = np.asarray(values[p.name], dtype=np.float64)[lanes - 1]
+                params[lanes, column:column + p.size] = given.reshape(len(lanes), p.size)
+        return cls(MaterialTable(kind, params, ["(none)"] + [f"lane{i}" for i in range(n)]),
+                   np.arange(1, n + 1, dtype=np.int64))
+
+    def take(self, idx: np.ndarray) -> "Materials":
+        """The lanes ``idx`` (indices or a boolean mask)."""
+        return Materials(self.table, self.row[idx])
+
+    @property
+    def delta(self) -> np.ndarray:
+        """(n,) bool: every lobe of the lane's material is a delta lobe."""
+        lobe = np.array([lobes(int(k)) for k in self.table.kind])[self.row]
+        return lobe == DELTA
+
+    def eval(self, wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
+        """f(wo, wi) without the cosine, ``(n, 3)``; zero below the surface and for delta lobes."""
+        return _eval_pdf_lanes(self.table.kind, self.table.params, self.row, wo, wi)[0]
+
+    def pdf(self, wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
+        """Solid-angle pdf with which :meth:`sample` picks ``wi``, ``(n,)``; 0 for delta lobes."""
+        return _eval_pdf_lanes(self.table.kind, self.table.params, self.row, wo, wi)[1]
+
+    def sample(self, u: np.ndarray, wo: np.ndarray) -> MaterialSample:
+        """Importance-sample ``wi`` given ``wo (n, 3)``, with ``u (n, 2)`` in [0, 1)^2."""
+        return MaterialSample(*_sample_lanes(self.table.kind, self.table.params, self.row, wo, u))
+
+
+@jit
+def _eval_pdf_lanes(kind, params, row, wo, wi):
+    n = len(row)
+    f, p = np.empty((n, 3)), np.empty(n)
+    for i in range(n):
+        value, p[i] = eval_pdf(kind[row[i]], params, row[i], (wo[i, 0], wo[i, 1], wo[i, 2]),
+                               (wi[i, 0], wi[i, 1], wi[i, 2]))
+        f[i, 0], f[i, 1], f[i, 2] = value
+    return f, p
+
+
+@jit
+def _sample_lanes(kind, params, row, wo, u):
+    n = len(row)
+    wi, weight, p = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
+    flags = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        w, value, p[i], flags[i] = sample(kind[row[i]], params, row[i], (wo[i, 0], wo[i, 1], wo[i, 2]),
+                                          u[i, 0], u[i, 1])
+        wi[i, 0], wi[i, 1], wi[i, 2] = w
+        weight[i, 0], weight[i, 1], weight[i, 2] = value
+    return wi, weight, p, flags
+
+
+__all__ = ["DELTA", "DIFFUSE", "GLOSSY", "NONE", "TYPES", "MaterialSample", "MaterialTable", "MaterialType",
+           "Materials", "Param", "eval_pdf", "lobes", "sample", "table"]

@@ -1,0 +1,33 @@
+"""``mirror``: ideal specular reflection, a delta BSDF.
+
+f and pdf are 0 for every direction (no other technique can hit the lobe); ``sample`` returns
+the reflection of wo with weight = reflectance and the ``DELTA`` flag.
+
+=============  =====  =======================================
+parameter      size   meaning
+=============  =====  =======================================
+reflectance    3      reflectance per channel, in [0, 1]
+=============  =====  =======================================
+"""
+
+from __future__ import annotations
+
+from ..jit import jit
+from .base import DELTA, MaterialType, Param, rgb
+
+CODE = 3  # the dispatch code (``tracer.materials``)
+TYPE = MaterialType("mirror", code=CODE, lobes=DELTA, doc="ideal specular reflection (delta)",
+                    params=(Param("reflectance", 3, lo=0.0, hi=1.0, doc="reflectance per channel"),))
+REFLECTANCE = TYPE.column("reflectance")
+
+
+@jit
+def eval_pdf(params, row, wo, wi):
+    """A delta lobe: 0 and 0 for any given direction."""
+    return (0.0, 0.0, 0.0), 0.0
+
+
+@jit
+def sample(params, row, wo, u0, u1):
+    """The mirror direction of wo about the normal."""
+    return (-wo[0], -wo[1], wo[2]), rgb(params, row, REFLECTANCE), 0.0, DELTA

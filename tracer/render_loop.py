@@ -1,0 +1,255 @@
+"""The wavefront render loop: batches of (pixel, sample) lanes, threads, progress, Ctrl-C.
+
+A render is cut into passes, each giving every pixel ``k`` more samples, and each pass into
+batches of consecutive pixels. ``k`` depends only on the spp and the strategy's rays per
+sample, never on the batch size or the threads, and every random number is a function of
+(seed, pixel, sample index, dimension) (``tracer.samplers``); batches are merged into the film
+in a fixed order. So the same seed gives the same image bit for bit whatever the batch size
+and the number of threads. Threads overlap the batches: Embree and the compiled kernels
+release the GIL.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import samplers
+from .estimators import DirectLighting
+from .film import Film
+from .jit import jit
+from .record import RenderRecord
+from .scene import Scene
+from .strategy import Strategy
+
+DEFAULT_BATCH_LANES = 1 << 15
+SAMPLES_PER_PASS = 8
+# A pass folds fewer samples per pixel when one sample casts many rays, so that one pixel's
+# pass never needs more shading rays than this (``--light-samples 10000``).
+MAX_PASS_RAYS = 2 * DEFAULT_BATCH_LANES
+
+
+@dataclass(frozen=True)
+class Batch:
+    """k samples (indices first_sample, ...) for each of npix pixels (first_pixel, ...)."""
+
+    first_sample: int
+    k: int
+    first_pixel: int
+    npix: int
+
+    @property
+    def lanes(self) -> int:
+        return self.k * self.npix
+
+
+@dataclass
+class RenderSettings:
+    """spp to add, seed, threads; ``first_sample`` offsets sample indices so that a resumed
+    render draws fresh random numbers; ``batch_lanes`` bounds the lanes of one batch (memory
+    only: the image does not depend on it); ``sampler`` names the random-number sampler."""
+
+    spp: int = 64
+    seed: int = 0
+    threads: int = field(default_factory=lambda: os.cpu_count() or 1)
+    first_sample: int = 0
+    batch_lanes: int = DEFAULT_BATCH_LANES
+    sampler: str = "independent"
+
+
+@dataclass
+class RenderResult:
+    """What a render produced: the film, wall time, and how it ended.
+
+    nonfinite counts samples that came out NaN or infinite (they were set to 0);
+    interrupted is true when Ctrl-C stopped the render early (the film keeps every finished
+    batch, with its true per-pixel counts).
+    """
+
+    film: Film
+    seconds: float
+    samples: int
+    nonfinite: int
+    interrupted: bool
+
+
+def pass_samples(spp: int, pixels: int, rays_per_sample: int) -> int:
+    """Samples per pixel in a pass: at least ``SAMPLES_PER_PASS`` (or spp, if fewer), so that
+    the film folds k samples at once per pixel instead of streaming the whole film through
+    memory for every sample, and more for small images, so that a pass still has enough lanes
+    to amortize the per-call cost of Embree; fewer when a sample casts so many rays that one
+    pixel's pass would exceed ``MAX_PASS_RAYS``. It depends on the image and the strategy, never
+    on the batch size or the threads."""
+    wanted = max(SAMPLES_PER_PASS, DEFAULT_BATCH_LANES // max(pixels, 1))
+    return max(1, min(spp, wanted, MAX_PASS_RAYS // max(1, rays_per_sample)))
+
+
+def plan_batches(width: int, height: int, spp: int, first_sample: int = 0,
+                 batch_lanes: int = DEFAULT_BATCH_LANES, k: int = SAMPLES_PER_PASS) -> list[Batch]:
+    """Cut ``width * height`` pixels x ``spp`` samples into batches, pass by pass: each pass
+    gives every pixel ``k`` samples (the last one what remains), and each batch holds the
+    pass's samples of at most ``max(1, batch_lanes // k)`` consecutive pixels."""
+    pixels = width * height
+    k = max(1, min(k, spp))
+    chunk = max(1, min(pixels, batch_lanes // k))
+    batches = []
+    for s0 in range(0, spp, k):
+        k_pass = min(k, spp - s0)
+        for p0 in range(0, pixels, chunk):
+            batches.append(Batch(first_sample + s0, k_pass, p0, min(chunk, pixels - p0)))
+    return batches
+
+
+def lanes_of(batch: Batch) -> tuple[np.ndarray, np.ndarray]:
+    """``(pixel, sample)`` (each ``(lanes,)`` int64) of a batch's lanes, pixel by pixel: lane
+    i is sample ``first_sample + i % k`` of pixel ``first_pixel + i // k``."""
+    pixel = np.repeat(np.arange(batch.first_pixel, batch.first_pixel + batch.npix, dtype=np.int64), batch.k)
+    sample = np.tile(np.arange(batch.first_sample, batch.first_sample + batch.k, dtype=np.int64), batch.npix)
+    return pixel, sample
+
+
+def render_batch(estimator: DirectLighting, batch: Batch,
+                 sampler: samplers.SamplerParams) -> tuple[np.ndarray, int]:
+    """Render one batch: returns samples ``(npix, k, 3)`` and the count of non-finite ones."""
+    pixel, sample = lanes_of(batch)
+    origins, dirs = estimator.scene.camera.lane_rays(sampler, pixel, sample)
+    radiance = estimator.shade_lanes(origins, dirs, sampler, pixel, sample)
+    nonfinite = _zero_nonfinite(radiance)
+    return radiance.reshape(batch.npix, batch.k, 3), nonfinite
+
+
+def _compile(estimator: DirectLighting, film: Film, sampler: samplers.SamplerParams) -> None:
+    """Run a batch's kernels once on zero lanes before the clock starts, so that numba compiles
+    them (or loads them from its cache) then: the first render after an install would otherwise
+    count seconds of compilation as rendering, unfair in an equal-time comparison."""
+    render_batch(estimator, Batch(0, 1, 0, 0), sampler)
+    film.add_block(0, np.zeros((0, 1, 3)))
+
+
+@jit
+def _zero_nonfinite(radiance: np.ndarray) -> int:
+    """Set the rows of ``radiance (n, 3)`` that hold a NaN or an infinity to 0; returns how many."""
+    count = 0
+    for i in range(len(radiance)):
+        if not (np.isfinite(radiance[i, 0]) and np.isfinite(radiance[i, 1]) and np.isfinite(radiance[i, 2])):
+            radiance[i, 0] = radiance[i, 1] = radiance[i, 2] = 0.0
+            count += 1
+    return count
+
+
+def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Film | None = None,
+           progress: bool = False, estimator: DirectLighting | None = None) -> RenderResult:
+    """Render ``settings.spp`` samples per pixel into ``film`` (a new one if None).
+
+    The film's record (``tracer.record``) is set to describe all it holds: the strategy and
+    sampler, the seed, the sample indices from the earliest a film passed in held to the last
+    drawn now, and the seconds of both. Ctrl-C stops the render, also during the first
+    compilation: batches already running finish and are kept, the rest are dropped, and the
+    result says ``interrupted``.
+    """
+    cam = scene.camera
+    film = film if film is not None else Film(cam.width, cam.height)
+    earlier = film.record if film.spp > 0 else None
+    sampler = samplers.make(settings.sampler, settings.seed)
+    bar = None
+    nonfinite = 0
+    samples = 0
+    interrupted = False
+    start = time.perf_counter()
+    seconds = 0.0
+
+    def merge(batch: Batch, result: tuple[np.ndarray, int]) -> None:
+        nonlocal nonfinite, samples
+        block, bad = result
+        film.add_block(batch.first_pixel, block)
+        nonfinite += bad
+        samples += batch.lanes
+        if bar is not None:
+            bar.update(batch.lanes)
+
+    try:
+        estimator = estimator if estimator is not None else DirectLighting(scene, strategy)
+        # The strategy the estimator was built for is the one that runs. A batch casts at most
+        # 2 x batch_lanes rays from its shading points (or one pixel's pass, if that is more),
+        # so that --light-samples 10000 shrinks the batches instead of exhausting memory.
+        runs = estimator.strategy
+        per_sample = runs.samples_per_lane
+        lanes = max(1, settings.batch_lanes * 2 // max(2, per_sample))
+        batches = plan_batches(cam.width, cam.height, settings.spp, settings.first_sample, lanes,
+                               pass_samples(settings.spp, cam.width * cam.height, per_sample))
+        _compile(estimator, film, sampler)
+        if progress and time.perf_counter() - start > 1.0:
+            print(f"tracer: compiled the shading kernels in {time.perf_counter() - start:.1f} s "
+                  "(once after an install or an edit; later runs load them from the cache)", file=sys.stderr)
+        bar = _progress_bar(cam.width * cam.height * settings.spp, progress)
+        start = time.perf_counter()
+        threads = max(1, settings.threads)
+        if threads == 1:
+            for batch in batches:
+                merge(batch, render_batch(estimator, batch, sampler))
+        else:
+            with ThreadPoolExecutor(max_workers=threads) as pool:
+                interrupted = _run_pipelined(pool, threads, batches, estimator, sampler, merge)
+        seconds = time.perf_counter() - start
+    except KeyboardInterrupt:
+        interrupted = True
+        seconds = time.perf_counter() - start
+    finally:
+        if bar is not None:
+            bar.close()
+    film.record = _record(scene, strategy, settings, film, seconds, earlier)
+    return RenderResult(film, seconds, samples, nonfinite, interrupted)
+
+
+def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Film, seconds: float,
+            earlier: RenderRecord | None) -> RenderRecord:
+    """The record of ``film`` after a render of ``settings.spp`` samples from
+    ``settings.first_sample``: spanning the samples of the ``earlier`` record too."""
+    record = RenderRecord.of_render(strategy, settings.sampler, settings.seed, settings.first_sample,
+                                    settings.spp, seconds, scene.path)
+    if earlier is not None:
+        first, _ = earlier.sample_range(film.spp)
+        record.first_sample = min(first, settings.first_sample)
+        record.seconds = seconds + (earlier.seconds or 0.0)
+    return record
+
+
+def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: list[Batch],
+                   estimator: DirectLighting, sampler: samplers.SamplerParams, merge) -> bool:
+    """Keep 2 x threads batches in flight and merge them in submission order.
+
+    Returns True if Ctrl-C stopped it; then the batches already started are awaited and kept.
+    """
+    in_flight: deque[tuple[Batch, Future]] = deque()
+    todo = iter(batches)
+    try:
+        for batch in todo:
+            in_flight.append((batch, pool.submit(render_batch, estimator, batch, sampler)))
+            if len(in_flight) >= 2 * threads:
+                done_batch, future = in_flight.popleft()
+                merge(done_batch, future.result())
+        while in_flight:
+            done_batch, future = in_flight.popleft()
+            merge(done_batch, future.result())
+        return False
+    except KeyboardInterrupt:
+        for batch, future in in_flight:
+            if not future.cancel():
+                merge(batch, future.result())
+        return True
+
+
+def _progress_bar(total: int, enabled: bool):
+    """A tqdm bar on stderr, or None when disabled or stderr is not a terminal."""
+    if not enabled or not sys.stderr.isatty():
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="sample", unit_scale=True, file=sys.stderr, leave=False,
+                dynamic_ncols=True, smoothing=0.1)

@@ -1,0 +1,118 @@
+"""The scene model: what every scene reader produces and the renderer reads.
+
+Everything becomes triangles (quads split in two, spheres tessellated, meshes as read), so
+one Embree mesh holds the whole scene and per-triangle arrays hold what shading needs. Each
+shape keeps its record as the file gave it (a sphere's centre and radius, a quad's corners),
+so that light techniques that sample a shape as a whole can find it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..camera import Camera
+from ..materials import MaterialTable
+
+# Offsets along the normal are this fraction of the scene's extent (see Scene.ray_epsilon).
+RELATIVE_RAY_OFFSET = 1e-5
+
+
+@dataclass
+class Shape:
+    """One shape of the scene as its file gave it.
+
+    type : ``quad``, ``sphere`` or ``mesh``.
+    first, count : its triangles are ``first .. first + count - 1`` of the scene's.
+    material : row in the material table (0: black).   emission : (3,) radiance from its front.
+    record : what defines it: quad ``origin, edge1, edge2``; sphere ``center, radius,
+        subdivisions``; mesh ``file``.
+    """
+
+    type: str
+    first: int
+    count: int
+    material: int
+    emission: np.ndarray
+    record: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def emissive(self) -> bool:
+        return bool(np.any(self.emission > 0.0))
+
+
+@dataclass
+class Scene:
+    """A loaded scene: triangles with per-triangle arrays, shapes, materials, point lights, camera.
+
+    vertices : (V, 3) float64 world positions, rounded to float32 (Embree's precision).
+    faces : (F, 3) int32 vertex indices.
+    material : (F,) int32 row of each triangle's material in ``materials`` (0: black).
+    emission : (F, 3) float64 radiance leaving each triangle's front side (0: not emissive),
+        rounded to float32.
+    shape_of_triangle : (F,) int32 index into ``shapes``.
+    shapes : the shapes, with their records.
+    materials : the material table (``tracer.materials``).
+    point_position, point_intensity : (P, 3) float64 (rounded to float32); intensity in W/sr.
+    render_defaults : the file's ``[render]`` settings (``spp``, ``strategy``).
+
+    Derived on construction: ``v0, edge1, edge2, normal`` (F, 3), ``area`` (F,),
+    ``hit_table`` (F, 16), ``ray_epsilon``.
+    """
+
+    path: str
+    camera: Camera
+    vertices: np.ndarray
+    faces: np.ndarray
+    material: np.ndarray
+    emission: np.ndarray
+    shape_of_triangle: np.ndarray
+    shapes: list[Shape]
+    materials: MaterialTable
+    point_position: np.ndarray
+    point_intensity: np.ndarray
+    render_defaults: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        # Vertices at float32 precision, as Embree holds them: hit points, light samples and pdfs
+        # then all use the very triangles Embree intersects.
+        self.vertices = np.asarray(self.vertices, dtype=np.float32).astype(np.float64)
+        tri = self.vertices[self.faces]
+        self.v0 = tri[:, 0]
+        self.edge1 = tri[:, 1] - tri[:, 0]
+        self.edge2 = tri[:, 2] - tri[:, 0]
+        cross = np.cross(self.edge1, self.edge2)
+        length = np.linalg.norm(cross, axis=1)
+        self.area = 0.5 * length
+        # Zero-area triangles get a zero normal (and zero area): never sampled, shaded black.
+        self.normal = cross / np.where(length > 0.0, length, 1.0)[:, None]
+        # What a hit needs, in one row per triangle so that a batch gathers it in one go:
+        # v0 (3), edge1 (3), edge2 (3), normal (3), emission (3), material row (1).
+        self.hit_table = np.ascontiguousarray(np.concatenate(
+            [self.v0, self.edge1, self.edge2, self.normal, self.emission, self.material[:, None]], axis=1))
+        # float32 rounding in Embree scales with the magnitude of the coordinates a ray starts
+        # from, which are the geometry's (hit points) and never the camera's (camera rays start
+        # at the camera, with no offset): an offset proportional to the geometry's extent makes
+        # a scene scaled by 1e-3 or 1e3 render the same image, wherever the camera is.
+        points = np.concatenate([self.vertices, self.point_position]) if len(self.point_position) \
+            else self.vertices
+        extent = 0.0
+        if len(points):
+            lo, hi = points.min(axis=0), points.max(axis=0)
+            extent = max(float(np.max(np.abs(np.concatenate([lo, hi])))), float(np.linalg.norm(hi - lo)))
+        self.ray_epsilon = RELATIVE_RAY_OFFSET * extent if extent > 0.0 else RELATIVE_RAY_OFFSET
+
+    @property
+    def name(self) -> str:
+        return Path(self.path).stem
+
+    @property
+    def light_of_triangle(self) -> np.ndarray:
+        """(F,) int32: the index of the emissive shape (area light) a triangle belongs to, in the
+        order of the emissive shapes; -1 for triangles of shapes that do not emit."""
+        emissive = np.array([s.emissive for s in self.shapes], dtype=bool)
+        light = np.where(emissive, np.cumsum(emissive) - 1, -1).astype(np.int32)
+        return light[self.shape_of_triangle] if len(self.shapes) else np.zeros(0, dtype=np.int32)

@@ -1,0 +1,102 @@
+"""What a strategy is: the names users choose among and the sample counts behind them.
+
+This module holds names and validation only (no numba), so that the command line can list the
+choices in ``--help`` without compiling anything. The estimator that runs a strategy is
+``tracer.estimators``; the heuristics themselves are ``tracer.mis``.
+
+A strategy is a pair of sample counts per camera sample (Mitsuba's ``emitter_samples`` and
+``bsdf_samples``) and the technique that draws the directions:
+
+=========  ==============  =================  ===============================
+strategy   light samples   direction samples  direction technique
+=========  ==============  =================  ===============================
+uniform    0               M                  uniform hemisphere
+cosine     0               M                  cosine-weighted hemisphere
+bsdf       0               M                  the material's own sampling
+light      N               0                  -
+mis        N               M                  the material's, weighted by MIS
+=========  ==============  =================  ===============================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+STRATEGIES = ("uniform", "cosine", "bsdf", "light", "mis")
+HEURISTICS = ("balance", "power", "max")
+LIGHT_SELECTIONS = ("power", "uniform")
+# The direction technique of each strategy that takes direction samples.
+DIRECTION_TECHNIQUE = {"uniform": "uniform", "cosine": "cosine", "bsdf": "bsdf", "mis": "bsdf"}
+
+
+@dataclass(frozen=True)
+class Strategy:
+    """How to estimate direct light: a strategy name and its sample counts.
+
+    name : one of ``STRATEGIES``.
+    heuristic : the MIS heuristic (``balance``, ``power`` with beta = 2, ``max``); used by ``mis``.
+    light_samples : light samples per camera sample; used by ``light`` and ``mis``.
+    bsdf_samples : direction samples per camera sample; used by ``uniform``, ``cosine``,
+        ``bsdf`` and ``mis``.
+    one_sample : one-sample MIS: each camera sample takes one technique, chosen with
+        probability light_samples : bsdf_samples.
+    light_selection : how the light to sample is chosen (``power`` or ``uniform``).
+
+    Raises ``ValueError`` with a message naming the bad field.
+    """
+
+    name: str = "mis"
+    heuristic: str = "power"
+    light_samples: int = 1
+    bsdf_samples: int = 1
+    one_sample: bool = False
+    light_selection: str = "power"
+
+    def __post_init__(self) -> None:
+        if self.name not in STRATEGIES:
+            raise ValueError(f"unknown strategy {self.name!r}; expected one of {', '.join(STRATEGIES)}")
+        if self.heuristic not in HEURISTICS:
+            raise ValueError(f"unknown heuristic {self.heuristic!r}; expected one of {', '.join(HEURISTICS)}")
+        if self.light_selection not in LIGHT_SELECTIONS:
+            raise ValueError(f"unknown light selection {self.light_selection!r}; "
+                             f"expected one of {', '.join(LIGHT_SELECTIONS)}")
+        for field_name in ("light_samples", "bsdf_samples"):
+            count = getattr(self, field_name)
+            if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+                raise ValueError(f"{field_name} must be a whole number >= 0, got {count!r}")
+        if self.light_count + self.direction_count == 0:
+            raise ValueError(f"strategy {self.name!r} with these counts takes no samples")
+
+    @property
+    def label(self) -> str:
+        """A short description such as ``mis (power, 1 light + 1 bsdf)``."""
+        if self.name == "mis":
+            mode = "one-sample, " if self.one_sample else ""
+            return f"mis ({mode}{self.heuristic}, {self.light_samples} light + {self.bsdf_samples} bsdf)"
+        count = self.light_count or self.direction_count
+        return self.name if count == 1 else f"{self.name} (x{count})"
+
+    @property
+    def light_count(self) -> int:
+        """Light samples per camera sample that this strategy takes (0 if it takes none)."""
+        return self.light_samples if self.name in ("light", "mis") else 0
+
+    @property
+    def direction_count(self) -> int:
+        """Direction samples per camera sample that this strategy takes (0 if it takes none)."""
+        return self.bsdf_samples if self.name != "light" else 0
+
+    @property
+    def direction_technique(self) -> str | None:
+        """``uniform``, ``cosine`` or ``bsdf``: how direction samples are drawn (None: none are)."""
+        return DIRECTION_TECHNIQUE.get(self.name)
+
+    @property
+    def one_sample_mis(self) -> bool:
+        """Each shading point takes one technique, chosen at random (both counts > 0)."""
+        return self.one_sample and self.light_count > 0 and self.direction_count > 0
+
+    @property
+    def samples_per_lane(self) -> int:
+        """Shading rays one camera sample casts at most (light plus direction samples)."""
+        return 1 if self.one_sample_mis else self.light_count + self.direction_count
