@@ -75,3 +75,27 @@ def test_command_line_help_does_not_load_numba():
             "print(sorted(m for m in ('numba', 'embreex', 'matplotlib', 'scipy') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_moving_the_camera_between_renders_moves_the_image():
+    """The camera's rays follow its current fields: a notebook that moves the camera and renders
+    again gets the new view, not a cached one."""
+    scene = tracer.load_scene(default_scene_path().parent / "cornell.toml", width=8, height=8)
+    a = tracer.render(scene, spp=1, seed=0, threads=1)
+    scene.camera.origin = scene.camera.origin + np.array([0.3, 0.0, 0.0])
+    b = tracer.render(scene, spp=1, seed=0, threads=1)
+    assert not np.array_equal(a.mean, b.mean)
+
+
+def test_reader_checks_every_element_of_a_parameter():
+    """A vector parameter is checked element by element against its declared range, open lower
+    bounds included (what a material type with such a parameter relies on)."""
+    from tracer.errors import InputError
+    from tracer.scene.toml_reader import _Reader
+
+    r = _Reader("x.toml", "materials.m", {"eta": [1.0, 0.0, 2.0], "k": [0.1, 0.2]})
+    with pytest.raises(InputError, match=r"materials.m.eta: expected numbers > 0.0"):
+        r.vector("eta", 3, lo=0.0, lo_open=True)
+    with pytest.raises(InputError, match="expected a list of 3 numbers"):
+        r.vector("k", 3)
+    assert r.vector("k", 2, lo=0.0).tolist() == [0.1, 0.2]

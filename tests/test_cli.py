@@ -305,3 +305,48 @@ def test_batches_cover_every_sample_once_within_the_lane_bound(lanes):
     covered = sorted((b.first_sample + j, p) for b in batches
                      for p in range(b.first_pixel, b.first_pixel + b.npix) for j in range(b.k))
     assert covered == [(s, p) for s in range(5, 18) for p in range(70)]
+
+
+def test_render_refuses_to_add_samples_the_record_cannot_describe(tmp_path):
+    """A film that holds samples takes more only from the same estimator, sampler and seed at
+    fresh sample indices: another seed, repeated indices or another heuristic raise InputError
+    naming what differs, and the film is left as it was. A film interrupted in its first pass
+    (some pixels without samples) still counts as holding samples."""
+    from tracer.errors import InputError
+
+    scene_path = tmp_path / "s.toml"
+    scene_path.write_text(GOOD)
+    scene = load_scene(scene_path)
+    film = render(scene, Strategy("mis"), RenderSettings(spp=4, seed=1, threads=1)).film
+    before = film.mean.copy()
+    for settings, strategy, words in [
+        (RenderSettings(spp=4, seed=2, threads=1, first_sample=4), Strategy("mis"), "seed 1"),
+        (RenderSettings(spp=4, seed=1, threads=1, first_sample=2), Strategy("mis"), "sample indices 0-3"),
+        (RenderSettings(spp=4, seed=1, threads=1, first_sample=4), Strategy("mis", "balance"),
+         "tracer:heuristic"),
+    ]:
+        with pytest.raises(InputError, match=words):
+            render(scene, strategy, settings, film=film)
+        assert np.array_equal(film.mean, before)
+    partial = Film(film.width, film.height)
+    partial.add_block(0, np.ones((3, 1, 3)))  # three pixels of a first pass, the rest empty
+    partial.record = film.record
+    result = render(scene, Strategy("mis"), RenderSettings(spp=2, seed=1, threads=1, first_sample=4),
+                    film=partial)
+    assert result.film.record.first_sample == 0 and result.film.record.next_sample == 6
+
+
+def test_reference_resume_refuses_other_settings(tmp_path, capsys):
+    """`reference --resume` with another heuristic than the file's: exit 2, one line naming the
+    field, the reference unchanged."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    out = tmp_path / "ref.exr"
+    assert main(["reference", str(scene), "-o", str(out), "--spp", "2", "--quiet"]) == 0
+    data = out.read_bytes()
+    capsys.readouterr()
+    assert main(["reference", str(scene), "-o", str(out), "--spp", "2", "--resume", "--heuristic", "balance",
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "tracer:heuristic" in err and len(err.strip().splitlines()) == 1
+    assert out.read_bytes() == data

@@ -90,6 +90,8 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
         strategy = Strategy(strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection)
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
         raise ValueError(f"spp must be a whole number >= 1, got {spp!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a whole number >= 0, got {seed!r}")
     settings = RenderSettings(spp=int(spp), seed=int(seed), threads=threads or os.cpu_count() or 1,
                               sampler=sampler)
     result = render_film(scene, strategy, settings, progress=progress)

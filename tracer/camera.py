@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,7 +32,7 @@ class Camera:
         r = r / np.linalg.norm(r)
         return f, r, np.cross(r, f)
 
-    @functools.cached_property
+    @property
     def _screen(self) -> tuple:
         """What the ray kernels need: width, height, tan(fov / 2), f, r, u."""
         return (self.width, self.height, float(np.tan(np.radians(self.fov) * 0.5))) + self.basis
@@ -58,8 +57,11 @@ class Camera:
         # largest batch and shared by the render threads: each keeps its own reference, so a
         # race between two of them costs at most an extra allocation.
         origins = self._origins
-        if origins is None or len(origins) < len(d):
-            origins = self._origins = np.tile(self.origin.astype(np.float32), (len(d), 1))
+        # Recomputed from the current fields every time (a notebook may move the camera between
+        # renders); only the tiled origin is kept, and checked against the current origin.
+        here = self.origin.astype(np.float32)
+        if origins is None or len(origins) < len(d) or not np.array_equal(origins[:1], here[None]):
+            origins = self._origins = np.tile(here, (len(d), 1))
         return origins[: len(d)], d
 
 

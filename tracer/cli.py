@@ -292,7 +292,7 @@ def cmd_reference(args: argparse.Namespace) -> int:
     scene = scene_mod.load_scene(args.scene, args.width, args.height)
     strategy = _strategy_from(args, "mis")
     output = _exr_path(args.output or f"{scene.name}_reference.exr")
-    film, seed, first = None, args.seed, 0
+    film, seed, first, sampler = None, args.seed, 0, "independent"
     if args.resume:
         if not output.is_file():
             raise InputError("--resume: no reference to resume", str(output))
@@ -304,7 +304,9 @@ def cmd_reference(args: argparse.Namespace) -> int:
             raise InputError("--resume: not an MIS reference", str(output))
         # Same seed, later sample indices: fresh random numbers that never repeat earlier ones.
         seed, first = film.record.seed or 0, film.sample_range()[1]
-    settings = RenderSettings(spp=args.spp, seed=seed, threads=args.threads, first_sample=first)
+        sampler = film.record.sampler or "independent"
+    settings = RenderSettings(spp=args.spp, seed=seed, threads=args.threads, first_sample=first,
+                              sampler=sampler)
     result = render(scene, strategy, settings, film=film, progress=not args.quiet)
     return _finish(result, scene, strategy, output, args.spp, args.quiet, args.exposure,
                    half=not args.float)

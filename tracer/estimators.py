@@ -250,9 +250,10 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         # the MIS weight.
         for j in range(dirs_here):
             dim = dimensions.direction(plan.n_light, j)
-            wi, weight, pdf_dir, delta = _direction_sample(plan.direction, kind, params, material, wo,
-                                                           samplers.uniform(sampler, state, dim),
-                                                           samplers.uniform(sampler, state, dim + 1))
+            wi, weight, pdf_dir, delta = _direction_sample(
+                plan.direction, kind, params, material, wo,
+                samplers.uniform(sampler, state, dimensions.lobe_choice(plan.n_light, j)),
+                samplers.uniform(sampler, state, dim), samplers.uniform(sampler, state, dim + 1))
             value = (weight[0] / own_dir, weight[1] / own_dir, weight[2] / own_dir)
             if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
                 _flag_nan(radiance, lane, value)
@@ -297,11 +298,11 @@ def _put(origins, dirs, values, lanes, row, origin, direction, value, lane) -> i
 
 
 @jit
-def _direction_sample(technique, kind, params, material, wo, u0, u1):
+def _direction_sample(technique, kind, params, material, wo, u_lobe, u0, u1):
     """One direction from the strategy's direction technique: ``(wi, weight, pdf, delta)`` with
-    weight = f |cos| / pdf as RGB (a delta lobe's: its reflectance)."""
+    weight = f |cos| / pdf as RGB (a delta lobe's: its contribution over its choice probability)."""
     if technique == BSDF:
-        wi, weight, pdf_dir, flags = materials.sample(kind, params, material, wo, u0, u1)
+        wi, weight, pdf_dir, flags = materials.sample(kind, params, material, wo, u_lobe, u0, u1)
         return wi, weight, pdf_dir, (flags & materials.DELTA) != 0
     wi = warp.uniform_hemisphere(u0, u1) if technique == UNIFORM else warp.cosine_hemisphere(u0, u1)
     pdf_dir = _hemisphere_pdf(technique, wi[2])

@@ -21,10 +21,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import samplers
+from .errors import InputError
 from .estimators import DirectLighting
 from .film import Film
 from .jit import jit
-from .record import RenderRecord
+from .record import RenderRecord, check_mergeable
 from .scene import Scene
 from .strategy import Strategy
 
@@ -149,13 +150,18 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
 
     The film's record (``tracer.record``) is set to describe all it holds: the strategy and
     sampler, the seed, the sample indices from the earliest a film passed in held to the last
-    drawn now, and the seconds of both. Ctrl-C stops the render, also during the first
-    compilation: batches already running finish and are kept, the rest are dropped, and the
-    result says ``interrupted``.
+    drawn now, and the seconds of both. A film that already holds samples must have been made
+    by the same estimator and sampler with the same seed and sample indices below
+    ``settings.first_sample`` (``InputError`` otherwise: its record could not say what the film
+    holds). Ctrl-C stops the render, also during the first compilation: batches already running
+    finish and are kept, the rest are dropped, and the result says ``interrupted``.
     """
     cam = scene.camera
     film = film if film is not None else Film(cam.width, cam.height)
-    earlier = film.record if film.spp > 0 else None
+    runs = estimator.strategy if estimator is not None else strategy
+    earlier = film.record if bool(film.count.any()) else None
+    if earlier is not None:
+        _check_continues(earlier, film, scene, runs, settings)
     sampler = samplers.make(settings.sampler, settings.seed)
     bar = None
     nonfinite = 0
@@ -178,7 +184,6 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         # The strategy the estimator was built for is the one that runs. A batch casts at most
         # 2 x batch_lanes rays from its shading points (or one pixel's pass, if that is more),
         # so that --light-samples 10000 shrinks the batches instead of exhausting memory.
-        runs = estimator.strategy
         per_sample = runs.samples_per_lane
         lanes = max(1, settings.batch_lanes * 2 // max(2, per_sample))
         batches = plan_batches(cam.width, cam.height, settings.spp, settings.first_sample, lanes,
@@ -203,8 +208,29 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     finally:
         if bar is not None:
             bar.close()
-    film.record = _record(scene, strategy, settings, film, seconds, earlier)
+    film.record = _record(scene, runs, settings, film, seconds, earlier)
     return RenderResult(film, seconds, samples, nonfinite, interrupted)
+
+
+def _check_continues(earlier: RenderRecord, film: Film, scene: Scene, strategy: Strategy,
+                     settings: RenderSettings) -> None:
+    """Refuse to add samples to a film whose record says it was made otherwise: another seed,
+    sample indices that the new ones would repeat, another estimator, sampler or scene file
+    (``record.check_mergeable``)."""
+    if earlier.seed is not None and earlier.seed != settings.seed:
+        raise InputError(f"the film holds samples of seed {earlier.seed}; adding seed {settings.seed} "
+                         "would leave its record unable to say which samples it holds: render apart "
+                         "and merge")
+    first, next_sample = earlier.sample_range(film.spp)
+    if settings.first_sample < next_sample and first < settings.first_sample + settings.spp:
+        raise InputError(f"the film already holds sample indices {first}-{next_sample - 1} of seed "
+                         f"{settings.seed}; start at {next_sample} (first_sample) for fresh samples")
+    new = RenderRecord.of_render(strategy, settings.sampler, settings.seed, settings.first_sample,
+                                 settings.spp, 0.0, scene.path)
+    try:
+        check_mergeable(earlier, film.spp, new, settings.spp)
+    except InputError as exc:
+        raise InputError(f"cannot add samples to this film: {exc}") from None
 
 
 def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Film, seconds: float,

@@ -12,7 +12,7 @@ roughconductor    2     ``roughconductor.py``: GGX microfacet reflector, Fresnel
 mirror            3     ``mirror.py``: ideal specular reflection (delta)
 ================  ====  ==============================================================
 
-Adding a material: a module with ``TYPE``, ``eval_pdf`` and ``sample``; its ``TYPE`` in
+Adding a material: a module with ``CODE``, ``TYPE``, ``eval_pdf`` and ``sample``; its ``TYPE`` in
 ``TYPES`` below; a branch in :func:`eval_pdf` and :func:`sample`. The scene reader reads its
 parameters from ``TYPE.params``; ``tests/test_sampling.py`` checks the interface's contract
 (sample weight = f cos / pdf, sample pdf = pdf) on every type in ``TYPES``, and a new type adds
@@ -52,14 +52,14 @@ def eval_pdf(kind: int, params, row: int, wo, wi):
 
 
 @jit
-def sample(kind: int, params, row: int, wo, u0: float, u1: float):
+def sample(kind: int, params, row: int, wo, u_lobe: float, u0: float, u1: float):
     """``(wi, weight, pdf, flags)`` sampled from the material in ``row`` (``base.py``)."""
     if kind == diffuse.CODE:
-        return diffuse.sample(params, row, wo, u0, u1)
+        return diffuse.sample(params, row, wo, u_lobe, u0, u1)
     if kind == roughconductor.CODE:
-        return roughconductor.sample(params, row, wo, u0, u1)
+        return roughconductor.sample(params, row, wo, u_lobe, u0, u1)
     if kind == mirror.CODE:
-        return mirror.sample(params, row, wo, u0, u1)
+        return mirror.sample(params, row, wo, u_lobe, u0, u1)
     return (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0
 
 
@@ -156,7 +156,15 @@ class Materials:
         return _eval_pdf_lanes(self.table.kind, self.table.params, self.row, wo, wi)[1]
 
     def sample(self, u: np.ndarray, wo: np.ndarray) -> MaterialSample:
-        """Importance-sample ``wi`` given ``wo (n, 3)``, with ``u (n, 2)`` in [0, 1)^2."""
+        """Importance-sample ``wi`` given ``wo (n, 3)``, with ``u (n, 3)`` in [0, 1)^3: the lobe
+        choice, then the direction. ``u (n, 2)`` (the direction only) is allowed when every
+        lane's material has a single lobe."""
+        u = np.asarray(u, dtype=np.float64)
+        if u.shape[1] == 2:
+            lobe_bits = np.array([bin(lobes(int(k))).count("1") for k in self.table.kind])[self.row]
+            if np.any(lobe_bits > 1):
+                raise ValueError("materials with several lobes need u (n, 3): a lobe choice and a direction")
+            u = np.concatenate([np.zeros((len(u), 1)), u], axis=1)
         return MaterialSample(*_sample_lanes(self.table.kind, self.table.params, self.row, wo, u))
 
 
@@ -178,7 +186,7 @@ def _sample_lanes(kind, params, row, wo, u):
     flags = np.empty(n, dtype=np.int64)
     for i in range(n):
         w, value, p[i], flags[i] = sample(kind[row[i]], params, row[i], (wo[i, 0], wo[i, 1], wo[i, 2]),
-                                          u[i, 0], u[i, 1])
+                                          u[i, 0], u[i, 1], u[i, 2])
         wi[i, 0], wi[i, 1], wi[i, 2] = w
         weight[i, 0], weight[i, 1], weight[i, 2] = value
     return wi, weight, p, flags

@@ -6,10 +6,14 @@ and three compiled per-lane functions over the scene's parameter table:
 - ``eval_pdf(params, row, wo, wi) -> (f, pdf)``: f(wo, wi) as RGB, without the cosine (0
   below the surface and for delta lobes), and the solid-angle pdf with which ``sample``
   picks ``wi`` (0 for delta lobes). Together because MIS needs both and they share work.
-- ``sample(params, row, wo, u0, u1) -> (wi, weight, pdf, flags)``: wi toward the light,
-  weight = f |cos theta_i| / pdf as RGB (for a delta lobe, the lobe's reflectance), pdf, and
-  the lobe flags of the sampled lobe (``DELTA``, ``GLOSSY``, ``DIFFUSE``); weight 0 and
-  flags 0 when the sample is invalid.
+- ``sample(params, row, wo, u_lobe, u0, u1) -> (wi, weight, pdf, flags)``: ``u_lobe`` chooses
+  the lobe of a material with several (unused by one-lobe materials), ``(u0, u1)`` the
+  direction; wi toward the light, weight = f |cos theta_i| / pdf as RGB, pdf, and the lobe
+  flags of the sampled lobe (``DELTA``, ``GLOSSY``, ``DIFFUSE``); weight 0 and flags 0 when
+  the sample is invalid. For a delta lobe, pdf is 0 and weight is the lobe's contribution
+  divided by the probability of choosing it (the mirror's: its reflectance). For a non-delta
+  sample of a material that mixes lobes, f and pdf are those of all its non-delta lobes
+  (pdf: the choice probabilities times the lobes' pdfs), as ``eval_pdf`` gives them.
 
 ``params`` is the ``(K, W)`` float64 table of all materials of a scene and ``row`` the
 material's row: a material reads its own columns by name (``column``), never by a bare number.

@@ -29,7 +29,7 @@ def eval_pdf(params, row, wo, wi):
 
 
 @jit
-def sample(params, row, wo, u0, u1):
+def sample(params, row, wo, u_lobe, u0, u1):
     """Cosine-weighted wi; f cos / pdf = (reflectance / pi) cos / (cos / pi) = reflectance."""
     wi = warp.cosine_hemisphere(u0, u1)
     p = warp.cosine_hemisphere_pdf(wi[2])

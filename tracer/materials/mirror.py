@@ -28,6 +28,6 @@ def eval_pdf(params, row, wo, wi):
 
 
 @jit
-def sample(params, row, wo, u0, u1):
+def sample(params, row, wo, u_lobe, u0, u1):
     """The mirror direction of wo about the normal."""
     return (-wo[0], -wo[1], wo[2]), rgb(params, row, REFLECTANCE), 0.0, DELTA

@@ -58,7 +58,7 @@ def eval_pdf(params, row, wo, wi):
 
 
 @jit
-def sample(params, row, wo, u0, u1):
+def sample(params, row, wo, u_lobe, u0, u1):
     """wi = reflect(wo, h) with h from the visible normals; weight = reflectance G1(wi)."""
     alpha = params[row, ALPHA]
     h = warp.ggx_visible_normal(wo, alpha, u0, u1)

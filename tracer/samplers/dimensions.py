@@ -7,15 +7,16 @@ Sobol: pbrt-v4's padded samplers) sees every 2-D decision on a pair of its own.
 
 Dimensions come in pairs ``(2 i, 2 i + 1)``:
 
-======================  ===========================================  =====================
+======================  ===========================================  =======================
 pair                    decision                                      dimensions
-======================  ===========================================  =====================
+======================  ===========================================  =======================
 0                       camera jitter inside the pixel (x, y)         0, 1
 1                       technique choice of one-sample MIS; unused    2, (3)
 2 + 2 j                 light sample j: the point on the emitter      4 + 4 j, 5 + 4 j
 3 + 2 j                 light sample j: which light; unused           6 + 4 j, (7 + 4 j)
-2 + 2 N + j             direction sample j (N light samples)          4 + 4 N + 2 j, + 1
-======================  ===========================================  =====================
+2 + 2 N + 2 j           direction sample j (N light samples)          4 + 4 N + 4 j, + 1
+3 + 2 N + 2 j           direction sample j: which lobe; unused        6 + 4 N + 4 j, (+ 1)
+======================  ===========================================  =======================
 
 1-D decisions take the first dimension of a pair of their own and leave the second unused,
 which costs nothing for counter-based samplers and keeps each pair a clean 2-D point set.
@@ -29,6 +30,7 @@ CAMERA_JITTER = 0
 TECHNIQUE_CHOICE = 2
 _FIRST_LIGHT = 4
 _PER_LIGHT = 4
+_PER_DIRECTION = 4
 
 
 @jit
@@ -46,4 +48,10 @@ def light_choice(j: int) -> int:
 @jit
 def direction(n_light: int, j: int) -> int:
     """First of the two dimensions of direction sample ``j`` after ``n_light`` light samples."""
-    return _FIRST_LIGHT + _PER_LIGHT * n_light + 2 * j
+    return _FIRST_LIGHT + _PER_LIGHT * n_light + _PER_DIRECTION * j
+
+
+@jit
+def lobe_choice(n_light: int, j: int) -> int:
+    """The dimension that chooses the material lobe of direction sample ``j``."""
+    return _FIRST_LIGHT + _PER_LIGHT * n_light + _PER_DIRECTION * j + 2

@@ -165,17 +165,22 @@ class _Reader:
 
     def vec3(self, name: str, default: Any = ..., nonnegative: bool = False,
              hi: float | None = None) -> np.ndarray:
+        return self.vector(name, 3, default, lo=0.0 if nonnegative else None, hi=hi)
+
+    def vector(self, name: str, size: int, default: Any = ..., lo: float | None = None,
+               lo_open: bool = False, hi: float | None = None) -> np.ndarray:
+        """A list of ``size`` finite numbers, each within [lo, hi] (lo excluded if lo_open)."""
         value = self.raw(name, default)
         if value is default and default is not ...:
             return np.asarray(value, dtype=np.float64)
-        if (not isinstance(value, list) or len(value) != 3
+        if (not isinstance(value, list) or len(value) != size
                 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in value)):
-            self.fail(f"expected a list of 3 numbers, got {_short(value)}", name)
+            self.fail(f"expected a list of {size} numbers, got {_short(value)}", name)
         arr = np.asarray(value, dtype=np.float64)
         if not np.all(np.isfinite(arr)):
             self.fail(f"expected finite numbers, got {value}", name)
-        if nonnegative and np.any(arr < 0.0):
-            self.fail(f"expected numbers >= 0, got {value}", name)
+        if lo is not None and (np.any(arr < lo) or (lo_open and np.any(arr == lo))):
+            self.fail(f"expected numbers {'>' if lo_open else '>='} {lo}, got {value}", name)
         if hi is not None and np.any(arr > hi):
             self.fail(f"expected numbers <= {hi}, got {value}", name)
         return arr
@@ -248,11 +253,11 @@ def _read_materials(path: str, table: Any) -> materials.MaterialTable:
         values: dict[str, object] = {}
         for p in kind.params:
             default = ... if p.default is None else p.default
-            if p.size == 3:
-                values[p.name] = m.vec3(p.name, default=default, nonnegative=p.lo == 0.0 and not p.lo_open,
-                                        hi=p.hi)
-            else:
+            if p.size == 1:
                 values[p.name] = m.number(p.name, default=default, lo=p.lo, lo_open=p.lo_open, hi=p.hi)
+            else:
+                values[p.name] = m.vector(p.name, p.size, default=default, lo=p.lo, lo_open=p.lo_open,
+                                          hi=p.hi)
         m.done()
         triples.append((name, kind.name, values))
     top.done()

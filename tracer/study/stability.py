@@ -195,8 +195,9 @@ def veach_bound(
         ("light", Strategy("light")),
         ("bsdf", Strategy("bsdf")),
     ):
-        # Sample index k of each pixel (the pixel's k-th copy): independent samples per point,
-        # the same numbers for the three estimators.
+        # Sample index k of each pixel (the pixel's k-th copy): independent samples per point.
+        # The estimators share the light dimensions, not the direction ones (those follow the
+        # light samples in the dimension map).
         radiance = DirectLighting(scene, strategy).radiance(origins, dirs, seed=seed, pixel=pixel,
                                                             sample=sample)
         values = radiance.reshape(-1, samples, 3)
