@@ -29,10 +29,14 @@ CHILD = """
 import sys, time
 from tracer.estimators import DirectLighting, Strategy
 from tracer.scene import load_scene
+# tracer.render first: an editable install would serve the working tree's render_loop to an
+# older tree that lacks it.
 try:
-    from tracer.render_loop import RenderSettings, render  # the module was tracer.render before 0.2
+    from tracer.render import RenderSettings, render  # the module's name before the open core
 except ImportError:
-    from tracer.render import RenderSettings, render
+    from tracer.render_loop import RenderSettings, render
+import tracer
+assert tracer.__file__.startswith(sys.argv[6]), (tracer.__file__, sys.argv[6])
 scene_path, strategy = sys.argv[1], sys.argv[4]
 size, spp, threads = int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[5])
 scene = load_scene(scene_path, size, size)
@@ -50,7 +54,8 @@ def times(tree: Path, args: argparse.Namespace) -> list[float]:
     env = dict(os.environ, PYTHONPATH=str(tree))
     scene = str(ROOT / "scenes" / f"{args.scene}.toml")
     out = subprocess.run([sys.executable, "-c", CHILD, scene, str(args.size), str(args.spp), args.strategy,
-                          str(args.threads)], cwd=tree, env=env, capture_output=True, text=True, check=True)
+                          str(args.threads), str(tree.resolve())], cwd=tree, env=env, capture_output=True,
+                         text=True, check=True)
     return [float(line) for line in out.stdout.split()]
 
 
