@@ -3,8 +3,10 @@ contract; the image does not depend on the thread count."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
@@ -299,7 +301,7 @@ def test_batches_cover_every_sample_once_within_the_lane_bound(lanes):
     """plan_batches gives every (pixel, sample index) exactly one lane, passes of the same k
     samples whatever the batch size (so the film folds the same groups), and never more than
     batch_lanes lanes to a batch, or one pixel's pass if that is more."""
-    batches = plan_batches(10, 7, 13, first_sample=5, batch_lanes=lanes, k=SAMPLES_PER_PASS)
+    batches = list(plan_batches(10, 7, 13, first_sample=5, batch_lanes=lanes, k=SAMPLES_PER_PASS))
     assert max(b.lanes for b in batches) <= max(lanes, SAMPLES_PER_PASS)
     assert {b.k for b in batches} == {SAMPLES_PER_PASS, 13 - SAMPLES_PER_PASS}
     covered = sorted((b.first_sample + j, p) for b in batches
@@ -350,3 +352,110 @@ def test_reference_resume_refuses_other_settings(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "tracer:heuristic" in err and len(err.strip().splitlines()) == 1
     assert out.read_bytes() == data
+
+
+def test_batch_plan_is_lazy_and_sample_indices_are_bounded(tmp_path):
+    """Planning a billion-billion samples costs nothing until batches are taken (the plan is a
+    generator: memory flat in spp), and sample indices past 2^53, where counts stop being exact
+    in float64, are refused before any work."""
+    import itertools
+
+    from tracer.errors import InputError
+
+    first = list(itertools.islice(plan_batches(64, 64, 10**18), 3))
+    assert [(b.first_sample, b.first_pixel, b.npix, b.k) for b in first] == [
+        (0, 0, 4096, 8), (8, 0, 4096, 8), (16, 0, 4096, 8)]
+    scene_path = tmp_path / "s.toml"
+    scene_path.write_text(GOOD)
+    with pytest.raises(InputError, match="sample indices must lie in"):
+        render(load_scene(scene_path), Strategy("mis"), RenderSettings(spp=2**53, first_sample=1, threads=1))
+
+
+def test_output_problems_are_found_before_rendering(tmp_path, capsys):
+    """-o naming a folder, or a PNG preview path that is a folder, and an absurd exposure: exit 2
+    with one line before any rendering (no compile message, no summary)."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    (tmp_path / "out.exr").mkdir()
+    (tmp_path / "other.png").mkdir()
+    for out in ("out.exr", "other.exr"):
+        assert main(["render", str(scene), "-o", str(tmp_path / out), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert "is a folder" in err and len(err.strip().splitlines()) == 1, err
+    with pytest.raises(SystemExit) as exit_info:
+        main(["render", str(scene), "--exposure", "2000"])
+    assert exit_info.value.code == 2
+    assert "-100 .. 100" in capsys.readouterr().err
+
+
+def test_a_signal_during_the_final_write_keeps_the_files(tmp_path, monkeypatch, capsys):
+    """Ctrl-C arriving while the finished render is written (injected: the EXR writer signals
+    the process itself half-way) is held until the EXR and the PNG are complete; then exit
+    130 with a line saying so. Without the deferral the KeyboardInterrupt would abort the
+    writes and lose the render."""
+    import os
+    import signal
+
+    from tracer import imagefiles
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    out = tmp_path / "r.exr"
+    real_write = imagefiles.write_exr
+
+    def interrupted_write(path, film, half=False):
+        os.kill(os.getpid(), signal.SIGINT)
+        real_write(path, film, half=half)
+
+    monkeypatch.setattr(imagefiles, "write_exr", interrupted_write)
+    assert main(["render", str(scene), "-o", str(out), "--spp", "2", "--quiet", "--threads", "1"]) == 130
+    assert "interrupted while writing" in capsys.readouterr().err
+    assert read_exr(out).spp == 2 and out.with_suffix(".png").stat().st_size > 0
+
+
+def test_seeds_and_sample_indices_past_32_bits_round_trip(tmp_path):
+    """EXR integer attributes are 32-bit: a seed and sample indices >= 2^31 are stored so that
+    they read back exactly, and such a render writes and resumes."""
+    scene_path = tmp_path / "s.toml"
+    scene_path.write_text(GOOD)
+    out = tmp_path / "r.exr"
+    seed = 2**40 + 3
+    assert main(["reference", str(scene_path), "-o", str(out), "--spp", "1", "--seed", str(seed),
+                 "--quiet"]) == 0
+    assert main(["reference", str(scene_path), "-o", str(out), "--spp", "1", "--resume", "--quiet"]) == 0
+    film = read_exr(out)
+    assert film.record.seed == seed and film.sample_range() == (0, 2) and film.spp == 2
+
+
+def test_a_billion_spp_render_has_flat_memory_and_stops_on_ctrl_c(tmp_path):
+    """`--spp 1000000000` at 64x64: resident memory between 3 s and 9 s into the render grows
+    by less than 40 MiB (the batch plan is lazy and the film fixed-size; a plan built up front
+    grew by about 40 MB/s), and Ctrl-C then writes what was rendered (exit 130). A first tiny
+    render fills the kernel cache so that the process renders, not compiles, while measured."""
+    import signal
+    import time
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    out = tmp_path / "r.exr"
+    warm = _start_render(scene, out, 1)
+    assert warm.wait(timeout=300) == 0
+    warm.stderr.close()
+
+    def rss_mib(pid: int) -> float:
+        status = Path(f"/proc/{pid}/status").read_text()
+        return int(re.search(r"VmRSS:\s+(\d+) kB", status).group(1)) / 1024
+
+    proc = subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(out), "--spp",
+                             "1000000000", "--width", "64", "--height", "64", "--threads", "2"],
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    time.sleep(3.0)
+    early = rss_mib(proc.pid)
+    time.sleep(6.0)
+    late = rss_mib(proc.pid)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert late - early < 40.0, (early, late)
+    assert proc.returncode == 130, err
+    assert 0 < read_exr(out).spp < 1_000_000_000

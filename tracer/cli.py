@@ -7,6 +7,7 @@ Exit status: 0 done, 1 a check failed, 2 bad input (one line on stderr, no trace
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 from pathlib import Path
@@ -116,7 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_strategy_options(c)
     c.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
     c.add_argument("--threads", type=_positive_int, default=os.cpu_count() or 1, help="worker threads")
-    c.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops (default 0)")
+    c.add_argument("--exposure", type=_exposure, default=0.0, help="PNG exposure in stops (default 0)")
     c.add_argument("--quiet", action="store_true", help="no progress lines")
     c.set_defaults(run=cmd_compare)
 
@@ -164,7 +165,8 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("a", help="first EXR")
     m.add_argument("b", help="second EXR")
     m.add_argument("-o", "--output", required=True, help="merged EXR (PNG preview beside it)")
-    m.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure in stops (default 0)")
+    m.add_argument("--exposure", type=_exposure, default=0.0,
+                   help="PNG preview exposure in stops (default 0)")
     m.add_argument("--quiet", action="store_true", help="no summary line")
     m.set_defaults(run=cmd_merge)
     return parser
@@ -190,7 +192,8 @@ def _add_render_options(p: argparse.ArgumentParser) -> None:
                    help="worker threads (default: all cores); the image does not depend on it")
     p.add_argument("--width", type=_positive_int, help="override the camera's width in pixels")
     p.add_argument("--height", type=_positive_int, help="override the camera's height in pixels")
-    p.add_argument("--exposure", type=float, default=0.0, help="PNG preview exposure in stops (default 0)")
+    p.add_argument("--exposure", type=_exposure, default=0.0,
+                   help="PNG preview exposure in stops (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")
 
 
@@ -210,6 +213,27 @@ def main(argv: list[str] | None = None) -> int:
         # `tracer ... | head`: the reader left; say nothing more (and nothing at exit either).
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+
+
+@contextlib.contextmanager
+def _interrupts_deferred():
+    """Within the block, SIGINT and SIGTERM are recorded instead of raising; yields a list that
+    holds the signals that arrived (the caller decides what to do after the block)."""
+    import signal
+    import threading
+
+    arrived: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield arrived
+        return
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    for s in previous:
+        signal.signal(s, lambda signum, frame: arrived.append(signum))
+    try:
+        yield arrived
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def _terminate_like_ctrl_c() -> None:
@@ -236,12 +260,32 @@ def _strategy_from(args: argparse.Namespace, name: str):
 
 
 def _exr_path(text: str) -> Path:
+    """The output EXR, checked before any work starts: a .exr name, an existing writable folder,
+    and neither it nor its PNG preview an existing folder."""
     output = Path(text)
     if output.suffix.lower() != ".exr":
         raise InputError("output must end in .exr", str(output))
-    if str(output.parent) and not output.parent.is_dir():
-        raise InputError("output folder does not exist", str(output.parent))
+    folder = output.parent if str(output.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputError("output folder does not exist", str(folder))
+    for path in (output, output.with_suffix(".png")):
+        if path.is_dir():
+            raise InputError("is a folder, not a file that can be written", str(path))
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError("output folder is not writable", str(folder))
     return output
+
+
+def _exposure(text: str) -> float:
+    """An argparse type: exposure in stops, finite and within +-100 (2^100 already saturates
+    every pixel; beyond that the scale overflows)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of stops, got '{text}'") from None
+    if not -100.0 <= value <= 100.0:
+        raise argparse.ArgumentTypeError(f"expected a number of stops in -100 .. 100, got {text}")
+    return value
 
 
 def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, exposure: float,
@@ -254,8 +298,14 @@ def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, 
     if result.interrupted and result.samples == 0:
         print("tracer: interrupted before any sample was rendered: nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED
-    write_exr(output, film, half=half)
-    write_png(png, film.image(), exposure)
+    # A finished render is written whatever arrives meanwhile: Ctrl-C or SIGTERM during the
+    # writes is held until both files are complete, then ends the program as usual.
+    with _interrupts_deferred() as deferred:
+        write_exr(output, film, half=half)
+        write_png(png, film.image(), exposure)
+    if deferred:
+        print(f"tracer: interrupted while writing; {output} and {png} were written first", file=sys.stderr)
+        return EXIT_INTERRUPTED
     if result.nonfinite:
         print(f"tracer: warning: {result.nonfinite} samples were NaN or infinite and were set to 0",
               file=sys.stderr)
@@ -323,8 +373,12 @@ def cmd_merge(args: argparse.Namespace) -> int:
                          args.b)
     merged = merge_renders(a, b)
     half = all(exr_is_half(p) for p in (args.a, args.b))
-    write_exr(output, merged, half=half)
-    write_png(output.with_suffix(".png"), merged.image(), args.exposure)
+    with _interrupts_deferred() as deferred:
+        write_exr(output, merged, half=half)
+        write_png(output.with_suffix(".png"), merged.image(), args.exposure)
+    if deferred:
+        print(f"tracer: interrupted while writing; {output} was written first", file=sys.stderr)
+        return EXIT_INTERRUPTED
     if not args.quiet:
         print(f"merged {a.spp} + {b.spp} spp -> {merged.spp} spp: {output}", file=sys.stderr)
     return 0

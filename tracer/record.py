@@ -67,12 +67,19 @@ class RenderRecord:
                    version=__version__)
 
     def attributes(self) -> dict[str, Any]:
-        """The ``tracer:*`` header attributes (booleans as 0/1; fields that are None left out)."""
+        """The ``tracer:*`` header attributes (booleans as 0/1; fields that are None left out).
+        EXR integer attributes are 32-bit: a whole number outside that range (a seed or sample
+        index >= 2^31) is stored as its decimal string, which :meth:`from_attributes` reads back."""
         out: dict[str, Any] = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if value is not None:
-                out[PREFIX + f.name] = int(value) if isinstance(value, bool) else value
+            if value is None:
+                continue
+            if isinstance(value, bool):
+                value = int(value)
+            elif isinstance(value, int) and not -2**31 <= value < 2**31:
+                value = str(value)
+            out[PREFIX + f.name] = value
         return out
 
     @classmethod

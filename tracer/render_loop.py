@@ -15,6 +15,7 @@ import os
 import sys
 import time
 from collections import deque
+from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -34,6 +35,7 @@ SAMPLES_PER_PASS = 8
 # A pass folds fewer samples per pixel when one sample casts many rays, so that one pixel's
 # pass never needs more shading rays than this (``--light-samples 10000``).
 MAX_PASS_RAYS = 2 * DEFAULT_BATCH_LANES
+MAX_SAMPLE_INDEX = 2**53  # sample counts and indices stay exact in float64 (means, EXR counts)
 
 
 @dataclass(frozen=True)
@@ -92,19 +94,18 @@ def pass_samples(spp: int, pixels: int, rays_per_sample: int) -> int:
 
 
 def plan_batches(width: int, height: int, spp: int, first_sample: int = 0,
-                 batch_lanes: int = DEFAULT_BATCH_LANES, k: int = SAMPLES_PER_PASS) -> list[Batch]:
+                 batch_lanes: int = DEFAULT_BATCH_LANES, k: int = SAMPLES_PER_PASS) -> Iterator[Batch]:
     """Cut ``width * height`` pixels x ``spp`` samples into batches, pass by pass: each pass
     gives every pixel ``k`` samples (the last one what remains), and each batch holds the
-    pass's samples of at most ``max(1, batch_lanes // k)`` consecutive pixels."""
+    pass's samples of at most ``max(1, batch_lanes // k)`` consecutive pixels. Lazily: memory
+    does not grow with spp."""
     pixels = width * height
     k = max(1, min(k, spp))
     chunk = max(1, min(pixels, batch_lanes // k))
-    batches = []
     for s0 in range(0, spp, k):
         k_pass = min(k, spp - s0)
         for p0 in range(0, pixels, chunk):
-            batches.append(Batch(first_sample + s0, k_pass, p0, min(chunk, pixels - p0)))
-    return batches
+            yield Batch(first_sample + s0, k_pass, p0, min(chunk, pixels - p0))
 
 
 def lanes_of(batch: Batch) -> tuple[np.ndarray, np.ndarray]:
@@ -156,6 +157,10 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     holds). Ctrl-C stops the render, also during the first compilation: batches already running
     finish and are kept, the rest are dropped, and the result says ``interrupted``.
     """
+    last = settings.first_sample + settings.spp
+    if settings.spp < 1 or settings.first_sample < 0 or last > MAX_SAMPLE_INDEX:
+        raise InputError(f"spp {settings.spp} from sample index {settings.first_sample}: sample indices must "
+                         f"lie in 0 .. {MAX_SAMPLE_INDEX} (2^53, where counts stay exact in float64)")
     cam = scene.camera
     film = film if film is not None else Film(cam.width, cam.height)
     runs = estimator.strategy if estimator is not None else strategy
@@ -246,7 +251,7 @@ def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fi
     return record
 
 
-def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: list[Batch],
+def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: Iterator[Batch],
                    estimator: DirectLighting, sampler: samplers.SamplerParams, merge) -> bool:
     """Keep 2 x threads batches in flight and merge them in submission order.
 
