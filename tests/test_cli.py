@@ -268,8 +268,9 @@ def test_interrupt_writes_what_was_rendered(tmp_path, signum):
 
 def test_interrupt_while_compiling_leaves_files_alone(tmp_path):
     """Ctrl-C during the first compilation (an empty kernel cache, so compiling takes seconds):
-    exit 130 with one line and no traceback, and an existing output file is left as it was
-    (nothing was rendered, so nothing is written over it)."""
+    the render stops once the kernels are compiled (an interrupt inside numba's compiler would
+    break it), exit 130 with no traceback, a line saying nothing was written, and an existing
+    output file is left as it was (nothing was rendered, so nothing is written over it)."""
     import os
     import signal
     import time
@@ -284,7 +285,8 @@ def test_interrupt_while_compiling_leaves_files_alone(tmp_path):
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
-    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert "Traceback" not in err and "nothing written" in err.strip().splitlines()[-1], err
+    assert len(err.strip().splitlines()) <= 2, err
     assert out.read_bytes() == b"an earlier render"
 
 

@@ -7,12 +7,11 @@ Exit status: 0 done, 1 a check failed, 2 bad input (one line on stderr, no trace
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import sys
 from pathlib import Path
 
-from . import __version__
+from . import __version__, interrupts
 from .errors import InputError
 
 EXIT_CHECK_FAILED = 1
@@ -215,27 +214,6 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
 
-@contextlib.contextmanager
-def _interrupts_deferred():
-    """Within the block, SIGINT and SIGTERM are recorded instead of raising; yields a list that
-    holds the signals that arrived (the caller decides what to do after the block)."""
-    import signal
-    import threading
-
-    arrived: list[int] = []
-    if threading.current_thread() is not threading.main_thread():
-        yield arrived
-        return
-    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    for s in previous:
-        signal.signal(s, lambda signum, frame: arrived.append(signum))
-    try:
-        yield arrived
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-
-
 def _terminate_like_ctrl_c() -> None:
     """SIGTERM (kill, a batch scheduler's time limit) stops a render as Ctrl-C does: what was
     rendered is written. Only possible from the main thread."""
@@ -300,7 +278,7 @@ def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, 
         return EXIT_INTERRUPTED
     # A finished render is written whatever arrives meanwhile: Ctrl-C or SIGTERM during the
     # writes is held until both files are complete, then ends the program as usual.
-    with _interrupts_deferred() as deferred:
+    with interrupts.deferred() as deferred:
         write_exr(output, film, half=half)
         write_png(png, film.image(), exposure)
     if deferred:
@@ -373,7 +351,7 @@ def cmd_merge(args: argparse.Namespace) -> int:
                          args.b)
     merged = merge_renders(a, b)
     half = all(exr_is_half(p) for p in (args.a, args.b))
-    with _interrupts_deferred() as deferred:
+    with interrupts.deferred() as deferred:
         write_exr(output, merged, half=half)
         write_png(output.with_suffix(".png"), merged.image(), args.exposure)
     if deferred:

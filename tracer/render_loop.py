@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import samplers
+from . import interrupts, samplers
 from .errors import InputError
 from .estimators import DirectLighting
 from .film import Film
@@ -193,7 +193,13 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         lanes = max(1, settings.batch_lanes * 2 // max(2, per_sample))
         batches = plan_batches(cam.width, cam.height, settings.spp, settings.first_sample, lanes,
                                pass_samples(settings.spp, cam.width * cam.height, per_sample))
-        _compile(estimator, film, sampler)
+        # numba's compiler cannot take a KeyboardInterrupt (one that lands in LLVM's callbacks
+        # leaves it broken): a signal during the compilation stops the render right after it.
+        with interrupts.deferred("tracer: interrupted; stopping as soon as the kernels are compiled"
+                                 if progress else None) as arrived:
+            _compile(estimator, film, sampler)
+        if arrived:
+            raise KeyboardInterrupt
         if progress and time.perf_counter() - start > 1.0:
             print(f"tracer: compiled the shading kernels in {time.perf_counter() - start:.1f} s "
                   "(once after an install or an edit; later runs load them from the cache)", file=sys.stderr)
