@@ -94,8 +94,19 @@ def test_reader_checks_every_element_of_a_parameter():
     from tracer.scene.toml_reader import _Reader
 
     r = _Reader("x.toml", "materials.m", {"eta": [1.0, 0.0, 2.0], "k": [0.1, 0.2]})
-    with pytest.raises(InputError, match=r"materials.m.eta: expected numbers > 0.0"):
+    with pytest.raises(InputError, match=r"materials.m.eta: expected numbers > 0,"):
         r.vector("eta", 3, lo=0.0, lo_open=True)
     with pytest.raises(InputError, match="expected a list of 3 numbers"):
         r.vector("k", 3)
     assert r.vector("k", 2, lo=0.0).tolist() == [0.1, 0.2]
+
+
+def test_tiny_sphere_has_finite_vertices():
+    """A sphere of radius 1e-20 at the origin (trimesh's own scaling gives NaN vertices there)
+    loads with finite vertices on the sphere."""
+    doc = {"camera": {"origin": [0.0, 0.0, 1.0], "target": [0.0, 0.0, 0.0], "fov": 40.0, "width": 4,
+                      "height": 4},
+           "shapes": [{"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 1e-20, "subdivisions": 1}]}
+    scene = tracer.load_scene(doc)
+    assert np.all(np.isfinite(scene.vertices))
+    np.testing.assert_allclose(np.linalg.norm(scene.vertices, axis=1), 1e-20, rtol=1e-6)

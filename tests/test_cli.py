@@ -97,7 +97,18 @@ BAD_SCENES = {
     "negative emission": (_mutate("emission = [5.0, 5.0, 5.0]", "emission = [5.0, -1.0, 5.0]"), {},
                           ["shapes[1].emission", ">= 0"]),
     "emission beyond float32": (_mutate("emission = [5.0, 5.0, 5.0]", "emission = [5.0, 1e39, 5.0]"), {},
-                                ["shapes[1].emission", "<= 3.4"]),
+                                ["shapes[1].emission", "<= 1e+18"]),
+    # Numbers that pass float64 checks but not the renderer's float32 (the variance channel
+    # squares radiance; Embree multiplies coordinate differences).
+    "emission whose square overflows float32": (
+        _mutate("emission = [5.0, 5.0, 5.0]", "emission = [5.0, 1e30, 5.0]"), {},
+        ["shapes[1].emission", "<= 1e+18"]),
+    "coordinate beyond float32": (_mutate("origin = [-1.0, 0.0, -1.0]", "origin = [-1.0, 1e300, -1.0]"), {},
+                                  ["shapes[0].origin", "<= 1e+15"]),
+    "camera target far away": (_mutate("target = [0.0, 0.5, 0.0]", "target = [0.0, 1e200, 0.0]"), {},
+                               ["camera.target", "<= 1e+15"]),
+    "sphere too small for float32": (_mutate("radius = 0.3", "radius = 1e-35"), {},
+                                     ["shapes[2].radius", "float32"]),
     "non-finite number": (_mutate("fov = 40.0", "fov = nan"), {}, ["camera.fov", "finite"]),
     "infinite vertex": (_mutate("origin = [-1.0, 0.0, -1.0]", "origin = [-1.0, inf, -1.0]"), {},
                         ["shapes[0].origin", "finite"]),

@@ -27,7 +27,12 @@ from .model import Scene, Shape
 # statistics and the float32 output image; used to refuse resolutions that cannot fit.
 FILM_BYTES_PER_PIXEL = 8 + 6 * 8 + 6 * 8 + 6 * 4
 MAX_SIDE = 1 << 15
-FLOAT32_MAX = float(np.finfo(np.float32).max)  # the largest radiance a scene may give
+# Validated in the precision the renderer uses. Embree holds coordinates in float32 and forms
+# products of coordinate differences: magnitudes up to 1e15 keep those below float32's 3.4e38.
+# The EXR holds the per-sample variance in float32, the square of a radiance: radiance and
+# intensity up to 1e18 keep it finite.
+MAX_COORDINATE = 1e15
+MAX_RADIANCE = 1e18
 
 
 def read_toml_file(path: str) -> dict[str, Any]:
@@ -69,8 +74,8 @@ def scene_from_document(doc: Any, path: str, base: Path, width: int | None = Non
     for i, light_table in enumerate(lights):
         light = _Reader(path, f"lights[{i}]", light_table)
         light.string("type", ("point",))
-        point_position.append(light.vec3("position"))
-        point_intensity.append(light.vec3("intensity", nonnegative=True, hi=FLOAT32_MAX))
+        point_position.append(_position(light, "position"))
+        point_intensity.append(light.vec3("intensity", nonnegative=True, hi=MAX_RADIANCE))
         light.done()
     top.done()
 
@@ -89,6 +94,11 @@ def scene_from_document(doc: Any, path: str, base: Path, width: int | None = Non
         point_intensity=_float32(point_intensity),
         render_defaults=render,
     )
+
+
+def _position(r: "_Reader", name: str, default: Any = ...) -> np.ndarray:
+    """A point or vector in scene units, within +-MAX_COORDINATE."""
+    return r.vector(name, 3, default, lo=-MAX_COORDINATE, hi=MAX_COORDINATE)
 
 
 def _float32(rows: list[np.ndarray]) -> np.ndarray:
@@ -180,9 +190,9 @@ class _Reader:
         if not np.all(np.isfinite(arr)):
             self.fail(f"expected finite numbers, got {value}", name)
         if lo is not None and (np.any(arr < lo) or (lo_open and np.any(arr == lo))):
-            self.fail(f"expected numbers {'>' if lo_open else '>='} {lo}, got {value}", name)
+            self.fail(f"expected numbers {'>' if lo_open else '>='} {lo:g}, got {value}", name)
         if hi is not None and np.any(arr > hi):
-            self.fail(f"expected numbers <= {hi}, got {value}", name)
+            self.fail(f"expected numbers <= {hi:g}, got {value}", name)
         return arr
 
     def string(self, name: str, choices: tuple[str, ...] | None = None, default: Any = ...) -> Any:
@@ -223,9 +233,9 @@ def _read_render(r: _Reader) -> dict[str, Any]:
 
 
 def _read_camera(r: _Reader, width: int | None, height: int | None) -> Camera:
-    origin = r.vec3("origin")
-    target = r.vec3("target")
-    up = r.vec3("up", default=[0.0, 1.0, 0.0])
+    origin = _position(r, "origin")
+    target = _position(r, "target")
+    up = _position(r, "up", default=[0.0, 1.0, 0.0])
     fov = r.number("fov", lo=0.0, lo_open=True, hi=179.0)
     w = r.number("width", default=256, lo=1, hi=MAX_SIDE, integer=True)
     h = r.number("height", default=256, lo=1, hi=MAX_SIDE, integer=True)
@@ -304,7 +314,7 @@ def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Ge
     shape_type = r.string("type", ("quad", "mesh", "sphere"))
     # Radiance is kept at float32 precision, as the EXR output and the light sampler's table
     # store it, so that every table holds the very same emission.
-    emission = r.vec3("emission", default=[0.0, 0.0, 0.0], nonnegative=True, hi=FLOAT32_MAX)
+    emission = r.vec3("emission", default=[0.0, 0.0, 0.0], nonnegative=True, hi=MAX_RADIANCE)
     emission = emission.astype(np.float32).astype(np.float64)
     material = 0
     if r.has("material"):
@@ -315,13 +325,19 @@ def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Ge
         material = 1 + material_names[1:].index(name)  # row 0 is the black material
 
     if shape_type == "quad":
-        o, e1, e2 = r.vec3("origin"), r.vec3("edge1"), r.vec3("edge2")
+        o, e1, e2 = _position(r, "origin"), _position(r, "edge1"), _position(r, "edge2")
+        if np.max(np.abs(np.stack([o + e1, o + e2, o + e1 + e2]))) > MAX_COORDINATE:
+            r.fail(f"the quad's corners leave the coordinate range +-{MAX_COORDINATE:g}", "edge1")
         record: dict[str, Any] = {"origin": o, "edge1": e1, "edge2": e2}
         vertices = np.stack([o, o + e1, o + e1 + e2, o + e2])
         faces = np.array([[0, 1, 2], [0, 2, 3]])
     elif shape_type == "sphere":
-        center = r.vec3("center")
-        radius = r.number("radius", lo=0.0, lo_open=True)
+        center = _position(r, "center")
+        radius = r.number("radius", lo=0.0, lo_open=True, hi=MAX_COORDINATE)
+        # Smaller than float32 can resolve at the centre, the tessellation collapses.
+        if radius < 1e-6 * max(float(np.max(np.abs(center))), 1e-24):
+            r.fail(f"radius {radius:g} is below what float32 resolves at the centre "
+                   f"(at least 1e-6 times the largest centre coordinate, and 1e-30)", "radius")
         subdivisions = r.number("subdivisions", default=3, lo=0, hi=7, integer=True)
         record = {"center": center, "radius": radius, "subdivisions": subdivisions}
         vertices, faces = _icosphere(subdivisions, radius, center)
@@ -336,8 +352,10 @@ def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Ge
 def _icosphere(subdivisions: int, radius: float, center: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     import trimesh
 
-    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
-    return np.asarray(mesh.vertices, dtype=np.float64) + center, np.asarray(mesh.faces)
+    # A unit sphere scaled here: trimesh normalizes after scaling, which gives NaN vertices for
+    # radii below about 1e-16.
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
+    return np.asarray(mesh.vertices, dtype=np.float64) * radius + center, np.asarray(mesh.faces)
 
 
 def _read_mesh(r: _Reader, mesh_path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -359,6 +377,10 @@ def _read_mesh(r: _Reader, mesh_path: Path) -> tuple[np.ndarray, np.ndarray]:
     if not np.all(np.isfinite(vertices)):
         bad = int(np.flatnonzero(~np.all(np.isfinite(vertices), axis=1))[0])
         r.fail(f"{mesh_path} has a non-finite vertex (vertex {bad}: {vertices[bad].tolist()})", "file")
+    if np.max(np.abs(vertices)) > MAX_COORDINATE:
+        bad = int(np.argmax(np.max(np.abs(vertices), axis=1)))
+        r.fail(f"{mesh_path} has a vertex beyond the coordinate range +-{MAX_COORDINATE:g} (vertex {bad})",
+               "file")
     if faces.min() < 0 or faces.max() >= len(vertices):
         r.fail(f"{mesh_path} has a face index outside its {len(vertices)} vertices", "file")
     return vertices, faces
