@@ -99,3 +99,56 @@ def test_png_preview(tmp_path):
     assert (buf.spec().width, buf.spec().height, buf.spec().nchannels) == (2, 2, 3)
     assert buf.spec().format == oiio.UINT8
     assert round(buf.get_pixels(oiio.FLOAT)[0, 0, 0] * 255) == 188
+
+
+def _write_raw_exr(path, mean, variance, attributes, count=None):
+    """An EXR in the render layout written straight through OpenImageIO, so that tests can
+    damage what tracer's own writer never would."""
+    planes = [mean, variance] + ([count[:, None]] if count is not None else [])
+    pixels = np.ascontiguousarray(np.concatenate(planes, axis=1), dtype=np.float32).reshape(1, len(mean), -1)
+    names = list(CHANNELS) + (["samples"] if count is not None else [])
+    spec = oiio.ImageSpec(len(mean), 1, len(names), "float")
+    spec.channelnames = tuple(names)
+    for key, value in attributes.items():
+        spec.attribute(key, value)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec) and out.write_image(pixels)
+    out.close()
+
+
+GOOD_MEAN, GOOD_VAR = np.ones((4, 3)), np.full((4, 3), 0.5)
+DAMAGED = {
+    "NaN mean": (np.where(np.arange(12).reshape(4, 3) == 7, np.nan, 1.0), GOOD_VAR, {"tracer:spp": 4}, None,
+                 "mean (R, G, B) is not a finite number at pixel (2, 0)"),
+    "negative variance": (GOOD_MEAN, -GOOD_VAR, {"tracer:spp": 4}, None,
+                          "variance is not a finite non-negative"),
+    "negative spp": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": -5}, None, "tracer:spp = -5 is not a sample count"),
+    "string spp": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": "many"}, None, "tracer:spp = 'many'"),
+    "string seed": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4, "tracer:seed": "abc"}, None, "tracer:seed"),
+    "NaN samples channel": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4}, np.array([4.0, np.nan, 4.0, 4.0]),
+                            "channel 'samples' is not a sample count at pixel (1, 0)"),
+    "huge samples channel": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4}, np.array([4.0, 1e30, 4.0, 4.0]),
+                             "channel 'samples' is not a sample count"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(DAMAGED))
+def test_damaged_render_files_are_refused_with_one_line(case, tmp_path):
+    """Every damaged field of a render EXR is refused on read with a message naming the file,
+    the field and (for pixel data) the first bad pixel, instead of NaN results or a traceback."""
+    mean, variance, attributes, count, words = DAMAGED[case]
+    path = tmp_path / "damaged.exr"
+    _write_raw_exr(path, mean, variance, attributes, count)
+    with pytest.raises(InputError) as info:
+        read_exr(path)
+    assert words in str(info.value) and "damaged.exr" in str(info.value), str(info.value)
+
+
+def test_half_reference_of_a_bright_emitter_stays_finite(tmp_path):
+    """Means beyond the half-float range (65504: a visible emitter of radiance 1e5) are written
+    as 32-bit floats even when half is asked for, so they read back finite and exact."""
+    film = Film(2, 1)
+    film.add_block(0, np.array([[[1e5, 2.0, 3.0]], [[0.5, 0.5, 0.5]]]))
+    write_exr(tmp_path / "ref.exr", film, half=True)
+    back = read_exr(tmp_path / "ref.exr")
+    assert np.all(np.isfinite(back.mean)) and back.mean[0, 0] == 1e5

@@ -27,16 +27,21 @@ from .record import RenderRecord
 CHANNELS = ("R", "G", "B", "variance.R", "variance.G", "variance.B")
 COUNT_CHANNEL = "samples"
 SPP_ATTRIBUTE = "tracer:spp"
+HALF_MAX = 65504.0  # the largest finite 16-bit float
+MAX_COUNT = 2**53  # sample counts stay exact in float64
 
 
 def write_exr(path: str | os.PathLike[str], film: Film, half: bool = False) -> None:
     """Write ``film`` and its record as a render EXR, atomically.
 
     ``half`` stores the means as 16-bit floats (3 significant digits), for references whose own
-    error is far below what they are compared with; variances stay 32-bit.
+    error is far below what they are compared with; variances stay 32-bit. Means beyond the
+    half range (65504, a visible bright emitter) would read back as inf: then the means are
+    written as 32-bit floats instead, whatever ``half`` says.
     """
     import OpenImageIO as oiio
 
+    half = half and bool(np.all(np.abs(film.mean) <= HALF_MAX))
     names = list(CHANNELS) + ([] if film.uniform else [COUNT_CHANNEL])
     planes = [film.mean, film.variance()]
     if not film.uniform:
@@ -82,17 +87,46 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
     attributes = {a.name: a.value for a in spec.extra_attribs if a.name.startswith("tracer:")}
     try:
         record = RenderRecord.from_attributes(attributes)
-        spp = int(attributes.get(SPP_ATTRIBUTE, 0))
-    except (InputError, ValueError, TypeError) as exc:
+    except InputError as exc:
         raise InputError(str(exc), path) from None
+    spp = _sample_count(attributes.get(SPP_ATTRIBUTE, 0), path)
     if COUNT_CHANNEL in names:
-        count = np.rint(data[:, names.index(COUNT_CHANNEL)]).astype(np.int64)
+        counts = data[:, names.index(COUNT_CHANNEL)]
+        bad = ~(np.isfinite(counts) & (counts >= 0) & (counts <= MAX_COUNT) & (counts == np.rint(counts)))
+        if bad.any():
+            raise InputError(f"channel '{COUNT_CHANNEL}' is not a sample count at {_pixel(bad, spec.width)}: "
+                             f"{counts[np.argmax(bad)]}", path)
+        count = counts.astype(np.int64)
     else:
         count = np.full(spec.height * spec.width, spp, dtype=np.int64)
     mean = np.ascontiguousarray(data[:, [names.index(c) for c in CHANNELS[:3]]])
     var = np.ascontiguousarray(data[:, [names.index(c) for c in CHANNELS[3:]]])
+    for label, values, ok in (("mean (R, G, B)", mean, np.isfinite(mean)),
+                              ("variance", var, np.isfinite(var) & (var >= 0.0))):
+        bad = ~np.all(ok, axis=1)
+        if bad.any():
+            raise InputError(f"{label} is not a finite{' non-negative' if label == 'variance' else ''} "
+                             f"number at {_pixel(bad, spec.width)}: {values[np.argmax(bad)].tolist()}", path)
     m2 = var * np.maximum(count - 1, 0)[:, None]
     return Film(spec.width, spec.height, count, mean, m2, record)
+
+
+def _sample_count(value, path: str) -> int:
+    """The header's ``tracer:spp`` as a count, or InputError naming it."""
+    try:
+        count = int(value)
+    except (TypeError, ValueError):
+        count = -1
+    if isinstance(value, float) and value != count or not 0 <= count <= MAX_COUNT:
+        raise InputError(f"header attribute {SPP_ATTRIBUTE} = {value!r} is not a sample count", path)
+    return count
+
+
+def _pixel(bad: np.ndarray, width: int) -> str:
+    """``pixel (x, y)`` of the first true entry of a per-pixel mask, and how many there are."""
+    first = int(np.argmax(bad))
+    more = int(bad.sum()) - 1
+    return f"pixel ({first % width}, {first // width})" + (f" and {more} more" if more else "")
 
 
 def exr_is_half(path: str | os.PathLike[str]) -> bool:
