@@ -110,3 +110,29 @@ def test_tiny_sphere_has_finite_vertices():
     scene = tracer.load_scene(doc)
     assert np.all(np.isfinite(scene.vertices))
     np.testing.assert_allclose(np.linalg.norm(scene.vertices, axis=1), 1e-20, rtol=1e-6)
+
+
+def test_a_signal_during_the_trimesh_import_is_not_swallowed(monkeypatch):
+    """trimesh's first import catches BaseException around optional imports, which swallowed a
+    Ctrl-C arriving then. Simulated: an import that signals the process and swallows what it
+    raises, as trimesh's does; the signal must still end in KeyboardInterrupt after it."""
+    import builtins
+    import os
+    import signal
+
+    from tracer.scene import toml_reader
+
+    real_import = builtins.__import__
+
+    def swallowing_import(name, *args, **kwargs):
+        if name == "trimesh":
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                sum(range(1000))  # let the handler run here, inside the import
+            except BaseException:
+                pass
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", swallowing_import)
+    with pytest.raises(KeyboardInterrupt):
+        toml_reader.import_trimesh()

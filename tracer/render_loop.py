@@ -208,7 +208,11 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         threads = max(1, settings.threads)
         if threads == 1:
             for batch in batches:
-                merge(batch, render_batch(estimator, batch, sampler))
+                result = render_batch(estimator, batch, sampler)
+                with interrupts.deferred() as arrived:  # a batch is merged whole or not at all
+                    merge(batch, result)
+                if arrived:
+                    raise KeyboardInterrupt
         else:
             with ThreadPoolExecutor(max_workers=threads) as pool:
                 interrupted = _run_pipelined(pool, threads, batches, estimator, sampler, merge)
@@ -264,21 +268,31 @@ def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: Iterator[Bat
     Returns True if Ctrl-C stopped it; then the batches already started are awaited and kept.
     """
     in_flight: deque[tuple[Batch, Future]] = deque()
-    todo = iter(batches)
+
+    def merge_oldest() -> None:
+        # The wait is interruptible; taking the batch off the queue and merging it are not, so
+        # that a Ctrl-C landing in between neither drops a finished batch nor merges it twice.
+        batch, future = in_flight[0]
+        result = future.result()
+        with interrupts.deferred() as arrived:
+            in_flight.popleft()
+            merge(batch, result)
+        if arrived:
+            raise KeyboardInterrupt
+
     try:
-        for batch in todo:
+        for batch in batches:
             in_flight.append((batch, pool.submit(render_batch, estimator, batch, sampler)))
             if len(in_flight) >= 2 * threads:
-                done_batch, future = in_flight.popleft()
-                merge(done_batch, future.result())
+                merge_oldest()
         while in_flight:
-            done_batch, future = in_flight.popleft()
-            merge(done_batch, future.result())
+            merge_oldest()
         return False
     except KeyboardInterrupt:
-        for batch, future in in_flight:
-            if not future.cancel():
-                merge(batch, future.result())
+        with interrupts.deferred():
+            for batch, future in in_flight:
+                if not future.cancel():
+                    merge(batch, future.result())
         return True
 
 

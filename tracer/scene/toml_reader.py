@@ -349,8 +349,21 @@ def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Ge
     geometry.add(shape_type, record, vertices, faces, material, emission)
 
 
+def import_trimesh():
+    """The trimesh module. Its first import runs optional imports inside ``except
+    BaseException``, which would swallow a Ctrl-C or SIGTERM arriving then (the render went on
+    and exited 0): signals are held during the import and raised right after it."""
+    from .. import interrupts
+
+    with interrupts.deferred() as arrived:
+        import trimesh
+    if arrived:
+        raise KeyboardInterrupt
+    return trimesh
+
+
 def _icosphere(subdivisions: int, radius: float, center: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
+    trimesh = import_trimesh()
 
     # A unit sphere scaled here: trimesh normalizes after scaling, which gives NaN vertices for
     # radii below about 1e-16.
@@ -359,7 +372,7 @@ def _icosphere(subdivisions: int, radius: float, center: np.ndarray) -> tuple[np
 
 
 def _read_mesh(r: _Reader, mesh_path: Path) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
+    trimesh = import_trimesh()
 
     if not mesh_path.is_file():
         r.fail(f"mesh file not found: {mesh_path}", "file")
