@@ -133,6 +133,12 @@ BAD_SCENES = {
     "zero width": (_mutate("width = 16", "width = 0"), {}, ["camera.width"]),
     "missing camera": ("[materials.a]\ntype = 'mirror'\nreflectance = [1, 1, 1]\n", {},
                        ["camera", "missing"]),
+    # Hostile files: each refused quickly with one line, no RecursionError or MemoryError.
+    "nesting 1000 deep": ("a = " + "[" * 1000 + "]" * 1000 + "\n", {}, ["nested too deeply"]),
+    "integer of 5000 digits": ("x = " + "9" * 5000 + "\n", {}, ["not valid TOML", "digits"]),
+    "dotted key 50000 deep": ("a" + ".a" * 50000 + " = 1\n", {}, ["line 1", "dotted parts"]),
+    "mesh name too long": (GOOD + '\n[[shapes]]\ntype = "mesh"\nfile = "' + "x" * 300 + '.ply"\n', {},
+                           ["shapes[3].file", "cannot look up mesh"]),
     "shapes not an array": (GOOD.replace("[[shapes]]", "[shapesx]", 1).replace("[[shapes]]", "[[shapesy]]")
                             .replace("[shapesx]", "[shapes]"), {}, ["shapes"]),
 }

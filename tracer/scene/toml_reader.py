@@ -35,11 +35,24 @@ MAX_COORDINATE = 1e15
 MAX_RADIANCE = 1e18
 
 
+MAX_SCENE_BYTES = 64 << 20  # far beyond any scene file (meshes live in their own files)
+MAX_KEY_PARTS = 64  # dotted keys and table headers deeper than this are refused before parsing
+
+
 def read_toml_file(path: str) -> dict[str, Any]:
-    """The parsed TOML document of ``path``; unreadable or invalid files raise InputError."""
+    """The parsed TOML document of ``path``; unreadable, invalid or hostile files (nesting
+    that exhausts the parser, integers past Python's digit limit, dotted keys thousands of
+    parts deep, which tomllib parses in quadratic time) raise InputError quickly."""
     try:
         with open(path, "rb") as fh:
-            return tomllib.load(fh)
+            data = fh.read(MAX_SCENE_BYTES + 1)
+        if len(data) > MAX_SCENE_BYTES:
+            raise InputError(f"larger than {MAX_SCENE_BYTES >> 20} MiB: not a scene file", path)
+        text = data.decode("utf-8")
+        _refuse_deep_keys(text, path)
+        return tomllib.loads(text)
+    except RecursionError:
+        raise InputError("not valid TOML: nested too deeply", path) from None
     except FileNotFoundError:
         raise InputError("no such scene file", path) from None
     except IsADirectoryError:
@@ -50,6 +63,17 @@ def read_toml_file(path: str) -> dict[str, Any]:
         raise InputError(f"not valid TOML: {exc}", path) from None
     except UnicodeDecodeError:
         raise InputError("not valid TOML: not UTF-8 text", path) from None
+    except ValueError as exc:  # Python's digit limit for integers, raised inside tomllib
+        raise InputError(f"not valid TOML: {exc}", path) from None
+
+
+def _refuse_deep_keys(text: str, path: str) -> None:
+    """Refuse a key or table header with more than MAX_KEY_PARTS dotted parts (the part of a
+    line before '=', or a [header]); values are not looked at."""
+    for number, line in enumerate(text.splitlines(), start=1):
+        head = line.split("=", 1)[0] if "=" in line else line
+        if head.count(".") >= MAX_KEY_PARTS and (head.lstrip().startswith("[") or "=" in line):
+            raise InputError(f"line {number}: a key of more than {MAX_KEY_PARTS} dotted parts", path)
 
 
 def scene_from_document(doc: Any, path: str, base: Path, width: int | None = None,
@@ -374,7 +398,11 @@ def _icosphere(subdivisions: int, radius: float, center: np.ndarray) -> tuple[np
 def _read_mesh(r: _Reader, mesh_path: Path) -> tuple[np.ndarray, np.ndarray]:
     trimesh = import_trimesh()
 
-    if not mesh_path.is_file():
+    try:
+        found = mesh_path.is_file()
+    except OSError as exc:  # a name too long for the file system, and the like
+        r.fail(f"cannot look up mesh {str(mesh_path)[:80]}...: {exc.strerror}", "file")
+    if not found:
         r.fail(f"mesh file not found: {mesh_path}", "file")
     try:
         # process=False keeps the file's faces and winding exactly as written.
