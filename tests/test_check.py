@@ -18,6 +18,7 @@ import pytest
 
 from tracer import estimators
 from tracer.cli import main
+from tracer.errors import InputError
 from tracer.study.check import format_table, load_baseline, run_check, save_baseline
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -143,3 +144,38 @@ def test_update_and_command_line(baseline_copy, tmp_path, capsys):
     assert main(["check", "--baseline", str(baseline_copy)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "entries[0].strategy" in err[0]
+
+
+GOOD_ENTRY = {"scene": "cornell", "strategy": "mis", "spp": 16, "seeds": [1, 2, 3]}
+DAMAGED_ENTRIES = {
+    "spp as a string": ({"spp": "16"}, "entries[0].spp"),
+    "fractional spp": ({"spp": 16.5}, "entries[0].spp"),
+    "seeds not a list": ({"seeds": 5}, "entries[0].seeds"),
+    "string seeds": ({"seeds": ["a", "b"]}, "entries[0].seeds"),
+    "repeated seeds": ({"seeds": [1, 1]}, "entries[0].seeds"),
+    "bad heuristic": ({"heuristic": "mean"}, "entries[0].heuristic"),
+    "negative light samples": ({"light_samples": -3}, "entries[0].light_samples"),
+    "boolean spp": ({"spp": True}, "entries[0].spp"),
+    "NaN relmse": ({"relmse": float("nan")}, "entries[0].relmse"),
+    "per-seed values of another length": ({"relmse_seeds": [0.1]}, "entries[0].relmse_seeds"),
+    "no samples at all": ({"strategy": "light", "light_samples": 0}, "entries[0]"),
+    "scene missing": ({"scene": None}, "entries[0].scene"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(DAMAGED_ENTRIES))
+def test_damaged_baseline_is_refused_with_the_key(case, tmp_path):
+    """Every damaged field of a baseline entry is refused on load with InputError naming the
+    file and the entry's key (before: tracebacks deep in the check for nine such files)."""
+    import json
+
+    change, key = DAMAGED_ENTRIES[case]
+    entry = {k: v for k, v in {**GOOD_ENTRY, **change}.items() if v is not None}
+    path = tmp_path / "baseline.json"
+    path.write_text(json.dumps({"entries": [entry]}))
+    with pytest.raises(InputError) as info:
+        load_baseline(path)
+    assert key in str(info.value) and "baseline.json" in str(info.value), str(info.value)
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps({"entries": [GOOD_ENTRY]}))
+    assert load_baseline(good)[0].spp == 16

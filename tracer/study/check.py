@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import sys
 from dataclasses import dataclass, field
@@ -45,7 +46,7 @@ from ..film import Film
 from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
 from ..render_loop import RenderSettings, render
 from ..scene import Scene, default_scene_path, load_scene
-from ..strategy import STRATEGIES, Strategy
+from ..strategy import HEURISTICS, STRATEGIES, Strategy
 from . import metrics, statistics
 from .statistics import FAMILY_ALPHA
 
@@ -152,16 +153,61 @@ def load_baseline(path: str | os.PathLike[str]) -> list[Entry]:
         unknown = sorted(set(raw) - known)
         if unknown:
             raise InputError(f"unknown key '{unknown[0]}'", path, f"{key}.{unknown[0]}")
+        for name in ("scene", "strategy", "spp", "seeds"):
+            if name not in raw:
+                raise InputError("missing key", path, f"{key}.{name}")
+        for name, value in raw.items():
+            problem = _field_problem(name, value, raw)
+            if problem:
+                raise InputError(f"expected {problem}, got {value!r}"[:200], path, f"{key}.{name}")
+        entry = Entry(**raw)
         try:
-            entry = Entry(**raw)
-        except TypeError as exc:
-            raise InputError(f"missing key: {exc}", path, key) from None
-        if entry.strategy not in STRATEGIES:
-            raise InputError(f"unknown strategy '{entry.strategy}'", path, f"{key}.strategy")
-        if not entry.seeds or len(set(entry.seeds)) != len(entry.seeds):
-            raise InputError("expected a list of distinct seeds", path, f"{key}.seeds")
+            entry.strategy_object()
+        except ValueError as exc:
+            raise InputError(str(exc), path, key) from None
         entries.append(entry)
     return entries
+
+
+def _is_int(value: Any, lo: int, hi: int = 2**53) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and lo <= value <= hi
+
+
+def _is_number(value: Any) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            and value >= 0)
+
+
+def _field_problem(name: str, value: Any, raw: dict[str, Any]) -> str | None:
+    """What a baseline entry's field should be, if ``value`` is not that; None if it is."""
+    if name in ("scene", "note"):
+        return None if isinstance(value, str) and (value or name == "note") else "a non-empty string"
+    if name == "strategy":
+        return None if value in STRATEGIES else f"one of {', '.join(STRATEGIES)}"
+    if name == "heuristic":
+        return None if value in HEURISTICS else f"one of {', '.join(HEURISTICS)}"
+    if name == "spp":
+        return None if _is_int(value, 1, 2**31) else "a whole number of samples >= 1"
+    if name in ("light_samples", "bsdf_samples"):
+        return None if _is_int(value, 0, 2**20) else "a whole number >= 0"
+    if name == "downsample":
+        return None if _is_int(value, 1, 2**15) else "a whole number >= 1"
+    if name == "pixel_test":
+        return None if isinstance(value, bool) else "true or false"
+    if name == "reference":
+        return None if value is None or (isinstance(value, str) and value) else "a file name"
+    if name == "seeds":
+        ok = isinstance(value, list) and value and all(_is_int(s, 0, 2**63) for s in value)
+        distinct = ok and len(set(value)) == len(value)
+        return None if distinct else "a non-empty list of distinct whole seeds >= 0"
+    if name in ("relmse", "variance"):
+        return None if value is None or _is_number(value) else "a finite number >= 0"
+    if name in ("relmse_seeds", "variance_seeds"):
+        seeds = raw.get("seeds")
+        ok = isinstance(value, list) and all(_is_number(v) for v in value) and (
+            not isinstance(seeds, list) or len(value) == len(seeds))
+        return None if value is None or ok else "a list of finite numbers >= 0, one per seed"
+    return None
 
 
 def save_baseline(path: str | os.PathLike[str], entries: list[Entry]) -> None:
