@@ -16,7 +16,7 @@ from scipy import stats
 from tracer.study import statistics
 from tracer.study.statistics import FAMILY_ALPHA
 
-__all__ = ["FAMILY_ALPHA", "image_mean_and_se", "mean_and_se", "sidak", "t_test_mean", "z_critical"]
+__all__ = ["FAMILY_ALPHA", "image_mean_and_se", "sidak", "t_test_mean", "z_critical"]
 
 
 def sidak(m: int, *, alpha: float = FAMILY_ALPHA) -> float:
@@ -28,12 +28,6 @@ def z_critical(m: int, *, alpha: float = FAMILY_ALPHA, sides: int = 2) -> float:
     """Normal critical value after the Sidak correction over m comparisons, two-sided (|z|
     above it rejects) or with ``sides=1`` one-sided (z above it rejects)."""
     return statistics.z_critical(alpha, m, sides)
-
-
-def mean_and_se(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sample mean and its standard error along axis 0."""
-    n = samples.shape[0]
-    return samples.mean(axis=0), samples.std(axis=0, ddof=1) / np.sqrt(n)
 
 
 def t_test_mean(samples: np.ndarray, expected: np.ndarray) -> np.ndarray:

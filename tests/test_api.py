@@ -37,12 +37,15 @@ def test_readme_example_runs(tmp_path, monkeypatch, capsys):
 
 
 def test_help_shows_the_api():
-    """pydoc lists the API functions and classes (they are loaded on first use)."""
+    """pydoc documents the API functions and classes themselves (loaded on first use), not only
+    the package docstring that names them: their own docstrings' first lines must appear."""
     import pydoc
 
     text = pydoc.render_doc(tracer, renderer=pydoc.plaintext)
     for name in ("load_scene", "render", "read_image", "compare", "Strategy", "Image"):
-        assert name in text, name
+        first_line = getattr(tracer, name).__doc__.strip().splitlines()[0]
+        assert first_line in text, name
+        assert first_line not in tracer.__doc__, name
 
 
 def test_scene_from_dict_equals_scene_from_file():

@@ -56,7 +56,7 @@ class Image:
         shape = (film.height, film.width, 3)
         return cls(film.image(), film.variance().reshape(shape), film.variance_of_mean().reshape(shape),
                    film.count.reshape(film.height, film.width), film.spp,
-                   film.record.seconds or 0.0 if seconds is None else seconds, nonfinite, interrupted, film)
+                   (film.record.seconds or 0.0) if seconds is None else seconds, nonfinite, interrupted, film)
 
     def write(self, path: str | os.PathLike[str], exposure: float = 0.0, half: bool = False) -> None:
         """Write the EXR (mean, variance, render record) to ``path`` and a PNG preview beside it

@@ -266,23 +266,29 @@ def _exposure(text: str) -> float:
     return value
 
 
-def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, exposure: float,
-            half: bool = False) -> int:
-    """Write the EXR and PNG of a render, report it on stderr, and return the exit status."""
+def _write_outputs(film, output: Path, exposure: float, half: bool) -> bool:
+    """Write a finished film's EXR and its PNG preview beside it. Ctrl-C or SIGTERM during the
+    writes is held until both files are complete; returns whether one arrived (then says so)."""
     from .imagefiles import write_exr, write_png
 
-    film = result.film
     png = output.with_suffix(".png")
-    if result.interrupted and result.samples == 0:
-        print("tracer: interrupted before any sample was rendered: nothing written", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    # A finished render is written whatever arrives meanwhile: Ctrl-C or SIGTERM during the
-    # writes is held until both files are complete, then ends the program as usual.
     with interrupts.deferred() as deferred:
         write_exr(output, film, half=half)
         write_png(png, film.image(), exposure)
     if deferred:
         print(f"tracer: interrupted while writing; {output} and {png} were written first", file=sys.stderr)
+    return bool(deferred)
+
+
+def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, exposure: float,
+            half: bool = False) -> int:
+    """Write the EXR and PNG of a render, report it on stderr, and return the exit status."""
+    film = result.film
+    png = output.with_suffix(".png")
+    if result.interrupted and result.samples == 0:
+        print("tracer: interrupted before any sample was rendered: nothing written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    if _write_outputs(film, output, exposure, half):
         return EXIT_INTERRUPTED
     if result.nonfinite:
         print(f"tracer: warning: {result.nonfinite} samples were NaN or infinite and were set to 0",
@@ -342,7 +348,7 @@ def cmd_reference(args: argparse.Namespace) -> int:
 
 def cmd_merge(args: argparse.Namespace) -> int:
     from .film import merge_renders
-    from .imagefiles import exr_is_half, read_exr, write_exr, write_png
+    from .imagefiles import exr_is_half, read_exr
 
     output = _exr_path(args.output)
     a, b = read_exr(args.a), read_exr(args.b)
@@ -351,11 +357,7 @@ def cmd_merge(args: argparse.Namespace) -> int:
                          args.b)
     merged = merge_renders(a, b)
     half = all(exr_is_half(p) for p in (args.a, args.b))
-    with interrupts.deferred() as deferred:
-        write_exr(output, merged, half=half)
-        write_png(output.with_suffix(".png"), merged.image(), args.exposure)
-    if deferred:
-        print(f"tracer: interrupted while writing; {output} was written first", file=sys.stderr)
+    if _write_outputs(merged, output, args.exposure, half):
         return EXIT_INTERRUPTED
     if not args.quiet:
         print(f"merged {a.spp} + {b.spp} spp -> {merged.spp} spp: {output}", file=sys.stderr)

@@ -9,6 +9,7 @@ PNG previews).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -65,7 +66,7 @@ class Film:
 
     def copy(self) -> "Film":
         return Film(self.width, self.height, self.count.copy(), self.mean.copy(), self.m2.copy(),
-                    RenderRecord(**vars(self.record)))
+                    dataclasses.replace(self.record))
 
     def variance(self) -> np.ndarray:
         """(P, 3) unbiased variance of one sample's estimate; 0 where count < 2."""

@@ -59,7 +59,7 @@ class RenderRecord:
         from . import __version__
 
         return cls(strategy=strategy.name,
-                   heuristic=strategy.heuristic if strategy.name == "mis" else "none",
+                   heuristic=strategy.recorded_heuristic,
                    light_samples=int(strategy.light_count), bsdf_samples=int(strategy.direction_count),
                    one_sample=bool(strategy.one_sample), light_selection=strategy.light_selection,
                    sampler=sampler, seed=int(seed), first_sample=int(first_sample),

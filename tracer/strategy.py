@@ -92,6 +92,11 @@ class Strategy:
         return DIRECTION_TECHNIQUE.get(self.name)
 
     @property
+    def recorded_heuristic(self) -> str:
+        """The heuristic as records and reports state it: ``none`` unless the strategy is mis."""
+        return self.heuristic if self.name == "mis" else "none"
+
+    @property
     def one_sample_mis(self) -> bool:
         """Each shading point takes one technique, chosen at random (both counts > 0)."""
         return self.one_sample and self.light_count > 0 and self.direction_count > 0

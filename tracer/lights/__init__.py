@@ -112,11 +112,9 @@ def build_tables(scene, light_selection: str = "power") -> tuple[LightTables, np
     ``triangle_area`` candidate, every point light of positive intensity a ``point`` one."""
     if light_selection not in SELECTIONS:
         raise ValueError(f"light selection must be one of {SELECTIONS}, got {light_selection!r}")
-    tri = np.flatnonzero((scene.shape_of_triangle >= 0) & (scene.area > 0.0)
-                         & (scene.emission.max(axis=1) > 0.0)) if len(scene.faces) else np.zeros(0, int)
+    # Emission is >= 0, so a triangle with area and some positive channel has positive flux.
+    tri = np.flatnonzero((scene.area > 0.0) & (scene.emission.max(axis=1, initial=0.0) > 0.0))
     tri_flux = np.pi * scene.area[tri] * scene.emission[tri].mean(axis=1)
-    tri = tri[tri_flux > 0.0]
-    tri_flux = tri_flux[tri_flux > 0.0]
     point_flux = 4.0 * np.pi * scene.point_intensity.mean(axis=1)
     points = np.flatnonzero(point_flux > 0.0)
     owner = np.concatenate([scene.shape_of_triangle[tri], -1 - points]).astype(np.int64)
@@ -133,9 +131,7 @@ def build_tables(scene, light_selection: str = "power") -> tuple[LightTables, np
     technique = np.array([TRIANGLE_AREA] * len(tri) + [POINT] * len(points), dtype=np.int8)
     candidate_of_triangle = np.full(len(scene.faces), -1, dtype=np.int32)
     candidate_of_triangle[tri] = np.arange(len(tri), dtype=np.int32)
-    emitting = np.flatnonzero((scene.emission.max(axis=1) > 0.0) & (scene.area > 0.0))
-    spheres = emitter_spheres(scene.vertices[scene.faces[emitting]], scene.shape_of_triangle[emitting],
-                              scene.ray_epsilon)
+    spheres = emitter_spheres(corners, scene.shape_of_triangle[tri], scene.ray_epsilon)
     tables = LightTables(alias_prob, alias, pmf, technique, np.ascontiguousarray(rows),
                          candidate_of_triangle, spheres)
     return tables, owner

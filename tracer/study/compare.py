@@ -130,17 +130,13 @@ class Comparison:
             film, spp = result.film, target
             spent += result.seconds
             rel = metrics.relmse(film.mean, self.reference.mean)
-            points.append({"strategy": strategy.name, "heuristic": _heuristic(strategy), "spp": spp,
+            points.append({"strategy": strategy.name, "heuristic": strategy.recorded_heuristic, "spp": spp,
                            "seconds": spent, "relmse": rel, "efficiency": metrics.efficiency(rel, spent)})
             if budget is not None and spent * 2.0 > budget:  # the next doubling would overshoot
                 break
             target *= 2
         self._say(f"  sweep {strategy.label}: {len(points)} points up to {spp} spp, {spent:.2f} s")
         return points
-
-
-def _heuristic(strategy: Strategy) -> str:
-    return strategy.heuristic if strategy.name == "mis" else "none"
 
 
 def fit_convergence(points: list[dict[str, float]], x: str) -> tuple[float, float]:
@@ -173,7 +169,7 @@ def time_to_reach(points: list[dict[str, float]], target: float) -> tuple[float,
 
 def run_row(run: Run) -> dict[str, object]:
     """The row of ``metrics.json``'s results for one run."""
-    row: dict[str, object] = {"strategy": run.strategy.name, "heuristic": _heuristic(run.strategy),
+    row: dict[str, object] = {"strategy": run.strategy.name, "heuristic": run.strategy.recorded_heuristic,
                               "light_samples": run.strategy.light_count,
                               "bsdf_samples": run.strategy.direction_count,
                               "spp": run.spp, "seconds": run.seconds}
