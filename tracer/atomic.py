@@ -7,7 +7,9 @@ interrupted run never leaves a torn file: readers see the old file or the new on
 from __future__ import annotations
 
 import os
+import re
 import tempfile
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -21,10 +23,19 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[str], None]) -> 
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
         raise InputError("output folder does not exist", str(folder))
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=folder)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=folder)
+    except OSError as exc:
+        raise InputError(f"cannot write: {exc.strerror or exc}", str(target)) from None
     os.close(fd)
     try:
-        write(tmp)
+        try:
+            write(tmp)
+            _sync(tmp)  # the bytes reach the disk before the name does: no empty file after a crash
+        except (OSError, InputError) as exc:
+            # Name the file the user asked for, not the temporary one (removed below); a full
+            # disk or a failing device ends here, from OpenImageIO or from open()/write().
+            raise InputError(_write_failure(exc, tmp, folder), str(target)) from None
         # mkstemp makes the file private (0600); give it the permissions a plain open() would.
         umask = os.umask(0)
         os.umask(umask)
@@ -34,6 +45,63 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[str], None]) -> 
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+    _sync(folder, directory=True)
+    _remove_stale_temporaries(target)
+
+
+def _write_failure(exc: BaseException, tmp: str, folder: Path) -> str:
+    """The one-line reason a write failed, without the temporary file's name, saying when the
+    disk is full (OpenImageIO reports no errno, so the free space is looked at)."""
+    if isinstance(exc, OSError):
+        reason = exc.strerror or str(exc)
+    else:
+        reason = str(exc).replace(f"{tmp}: ", "").removeprefix("cannot write: ")
+    reason = reason.replace(f'"{tmp}"', "the temporary file").replace(tmp, "the temporary file")
+    try:
+        free = os.statvfs(folder)
+        if free.f_bavail * free.f_frsize < 1 << 20:
+            reason = f"no space left on the device ({free.f_bavail * free.f_frsize} bytes free); {reason}"
+    except OSError:
+        pass
+    return f"cannot write: {reason}; the existing file, if any, is unchanged"
+
+
+# A temporary file left by a process that was killed (SIGKILL cannot be caught) while writing:
+# mkstemp's name for it (prefix, eight characters, suffix), untouched for longer than any write
+# takes. Only files of exactly that shape next to the target are removed.
+STALE_SECONDS = 3600.0
+
+
+def _remove_stale_temporaries(target: Path) -> None:
+    """Delete ``.STEM.XXXXXXXX.SUFFIX`` files beside ``target`` older than STALE_SECONDS."""
+    pattern = re.compile(re.escape(f".{target.stem}.") + r"[a-z0-9_]{8}" + re.escape(target.suffix))
+    folder = target.parent if str(target.parent) else Path(".")
+    try:
+        candidates = [p for p in folder.iterdir() if pattern.fullmatch(p.name)]
+        now = time.time()
+        for path in candidates:
+            if now - path.stat().st_mtime > STALE_SECONDS:
+                path.unlink()
+    except OSError:
+        pass  # tidying up is a courtesy; the write itself has succeeded
+
+
+def _sync(path: str | Path, directory: bool = False) -> None:
+    """fsync a file (or a folder, so that a rename in it is durable); errors on a folder are
+    ignored (some file systems refuse to sync one), errors on a file propagate."""
+    try:
+        fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
+    except OSError:
+        if directory:
+            return
+        raise
+    try:
+        os.fsync(fd)
+    except OSError:
+        if not directory:
+            raise
+    finally:
+        os.close(fd)
 
 
 def write_text(path: str | os.PathLike[str], text: str) -> None:

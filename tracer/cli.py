@@ -274,7 +274,10 @@ def _write_outputs(film, output: Path, exposure: float, half: bool) -> bool:
     png = output.with_suffix(".png")
     with interrupts.deferred() as deferred:
         write_exr(output, film, half=half)
-        write_png(png, film.image(), exposure)
+        try:
+            write_png(png, film.image(), exposure)
+        except InputError as exc:
+            raise InputError(f"{exc} ({output} was written)") from None
     if deferred:
         print(f"tracer: interrupted while writing; {output} and {png} were written first", file=sys.stderr)
     return bool(deferred)
