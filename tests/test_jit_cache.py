@@ -7,13 +7,19 @@ read. These tests are what to run before raising that cap."""
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import json
 import os
+import pickle
+import shlex
 import shutil
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
+
+import pytest
 
 import tracer
 
@@ -76,17 +82,34 @@ def _copy_with_probe(root: Path) -> Path:
     return probe
 
 
-def _run(root: Path) -> dict:
+def _env(root: Path, **extra: str) -> dict:
+    """The environment for a fresh interpreter on the copy at root: no numba settings of ours,
+    plus extra."""
     env = {k: v for k, v in os.environ.items()
            if k not in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES", "NUMBA_DISABLE_JIT")}
     env["PYTHONPATH"] = str(root)
     # No .pyc files: the edit below keeps a.py's size, and CPython's .pyc check (whole-second
     # mtime and size) could otherwise serve the old bytecode within the same second.
     env["PYTHONDONTWRITEBYTECODE"] = "1"
-    done = subprocess.run([sys.executable, "-c", RUN], cwd=root, env=env, capture_output=True,
-                          text=True, timeout=120)
+    env.update(extra)
+    return env
+
+
+def _launch(root: Path, args: list[str], env: dict | None = None,
+            prefix: list[str] | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([*(prefix or []), sys.executable, *args], cwd=root,
+                          env=env or _env(root), capture_output=True, text=True, timeout=120)
+
+
+def _run_with_stderr(root: Path, env: dict | None = None,
+                     prefix: list[str] | None = None) -> tuple[dict, str]:
+    done = _launch(root, ["-c", RUN], env, prefix)
     assert done.returncode == 0, done.stderr
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    return json.loads(done.stdout.strip().splitlines()[-1]), done.stderr
+
+
+def _run(root: Path) -> dict:
+    return _run_with_stderr(root)[0]
 
 
 def test_edit_of_inlined_module_recompiles_its_caller(tmp_path):
@@ -137,3 +160,105 @@ def test_compiled_code_is_keyed_to_all_sources():
     locator = estimators._shade._cache._impl._locator  # the dispatcher's own cache (numba internals)
     assert type(locator).__name__.startswith("TracerStamped")
     assert locator.get_source_stamp() == jit.source_digest()
+
+
+@contextlib.contextmanager
+def _read_only(folders: list[Path]):
+    """Make folders read-only for the commands run with the prefix this yields. Not as root:
+    chmod, undone on exit. As root, whom permission bits do not stop: a private mount namespace
+    (``unshare``) in which each folder is bind-mounted read-only, as on a read-only install;
+    skipped where that is not allowed."""
+    if os.geteuid() != 0:
+        for folder in folders:
+            for path in [folder, *folder.rglob("*")]:
+                path.chmod(path.stat().st_mode & ~0o222)
+        try:
+            yield []
+        finally:
+            for folder in folders:
+                for path in [folder, *folder.rglob("*")]:
+                    path.chmod(path.stat().st_mode | 0o200)
+        return
+    mounts = "".join(f"mount --bind {q} {q} && mount -o remount,ro,bind {q} {q} && "
+                     for q in map(shlex.quote, map(str, folders)))
+    prefix = ["unshare", "--mount", "--propagation", "private", "sh", "-c", mounts + 'exec "$@"', "sh"]
+    if shutil.which("unshare") is None or subprocess.run([*prefix, "true"],
+                                                          capture_output=True).returncode != 0:
+        pytest.skip("root without mount namespaces: no way to make a folder read-only")
+    yield prefix
+
+
+def test_no_writable_cache_folder_compiles_in_memory_with_one_note(tmp_path):
+    """Runs b.call() and ``tracer --help`` in fresh processes on a read-only copy of tracer,
+    with HOME read-only too and no NUMBA_CACHE_DIR, and compares the results with 1.0 compiled
+    in memory and stderr with exactly one note line naming the refused folders. It fails if
+    numba's "no locator available" RuntimeError escapes when a module defines its kernels (it
+    did: every command that imports one died), if the note is missing or printed once per
+    kernel (a.value and b.call both try), or if ``--help`` prints anything on stderr."""
+    site, home = tmp_path / "site", tmp_path / "home"
+    home.mkdir()
+    probe = _copy_with_probe(site)
+    env = _env(site, HOME=str(home))
+    env.pop("XDG_CACHE_HOME", None)  # numba's user-wide folder is then HOME/.cache/numba
+
+    with _read_only([site, home]) as prefix:
+        result, err = _run_with_stderr(site, env, prefix)
+        helped = _launch(site, ["-m", "tracer", "--help"], env, prefix)
+
+    assert (result["value"], result["hits"], result["misses"]) == (1.0, 0, 1)
+    assert result["cache_path"] is None, "a cache was attached although no folder is writable"
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("tracer: note: cannot cache compiled kernels ("), err
+    assert str(probe / "__pycache__") in lines[0] and str(home) in lines[0], err
+    assert not (probe / "__pycache__").exists()
+    assert helped.returncode == 0, helped.stderr
+    assert helped.stdout.startswith("usage: tracer") and helped.stderr == ""
+
+
+def _assert_recovers(root: Path) -> None:
+    """A run over a damaged entry recompiles with one note; the run after it loads cleanly."""
+    damaged, err = _run_with_stderr(root)
+    assert (damaged["value"], damaged["hits"], damaged["misses"]) == (1.0, 0, 1)
+    lines = err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("tracer: note: damaged compiled-kernel cache"), err
+
+    again, err = _run_with_stderr(root)
+    assert (again["value"], again["hits"], again["misses"]) == (1.0, 1, 0), "entry not rewritten"
+    assert err == ""
+
+
+@pytest.mark.parametrize("damage", ["truncated", "nonsense"])
+def test_damaged_index_is_a_cache_miss(tmp_path, damage):
+    """Compares b.call() and the cache counters across fresh processes after its .nbi index is
+    cut in half, or replaced by numba's version header followed by a list instead of a (stamp,
+    overloads) pair: the next run must compile with one note line, and the run after it must
+    load from the cache with nothing on stderr. It fails if the unpickling error escapes (it
+    did, on every run until __pycache__ was removed) or if the index is not rewritten."""
+    probe = _copy_with_probe(tmp_path)
+    _run(tmp_path)
+    (index,) = (probe / "__pycache__").glob("b.call-*.nbi")
+    if damage == "truncated":
+        index.write_bytes(index.read_bytes()[: index.stat().st_size // 2])
+    else:
+        with index.open("rb") as f:
+            version = pickle.load(f)
+        index.write_bytes(pickle.dumps(version) + pickle.dumps(["not", "an", "index"]))
+    _assert_recovers(tmp_path)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "garbage"])
+def test_damaged_data_is_a_cache_miss(tmp_path, damage):
+    """Compares b.call() and the cache counters across fresh processes after its .nbc data file
+    (the compiled code) is cut in half or overwritten with bytes that are no pickle: the next
+    run must compile with one note line, and the run after it must load from the cache with
+    nothing on stderr. It fails if the unpickling error escapes (it did, on every run until
+    __pycache__ was removed) or if the data file is not rewritten."""
+    probe = _copy_with_probe(tmp_path)
+    _run(tmp_path)
+    (data,) = (probe / "__pycache__").glob("b.call-*.nbc")
+    if damage == "truncated":
+        data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
+    else:
+        data.write_bytes(hashlib.sha256(b"garbage").digest() * 64)
+    _assert_recovers(tmp_path)

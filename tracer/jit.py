@@ -3,8 +3,12 @@
 The estimator runs loops over lanes in compiled code instead of ~100 whole-array numpy passes
 (see the README's Performance section): one pass per batch, no temporaries. Options:
 
-- ``cache=True``: compiled machine code is kept beside the sources (``__pycache__``), so only
-  the first run after an install or an edit pays for compilation (about 20 s);
+- caching: compiled machine code is kept beside the sources (``__pycache__``), or under
+  ``NUMBA_CACHE_DIR`` when that is set, else in the user's cache folder, so only the first run
+  after an install or an edit pays for compilation (about 20 s). If none of these folders is
+  writable (a read-only install with no writable HOME), kernels are compiled in memory on each
+  run and one note line on stderr says so; a damaged cache entry (a truncated or garbage
+  ``.nbi`` index or ``.nbc`` data file) is a cache miss: recompiled and rewritten, with one note;
 - ``nogil=True``: render threads run the kernels on both cores at once;
 - ``error_model="numpy"``: x / 0 gives inf or nan as in numpy instead of raising, so a
   degenerate sample is caught by the render loop's non-finite guard;
@@ -29,17 +33,83 @@ on numba internals (``CacheImpl._locator_classes``, ``_SourceFileBackedLocatorMi
 ``from_function`` / ``get_source_stamp`` hooks), read in numba's source for every release from
 0.60 to 0.68; pyproject.toml pins numba to that range, and tests/test_jit_cache.py checks end to
 end that an edit of an inlined module in a subpackage recompiles its caller.
+
+Failures of the cache must not stop a render, but numba lets two of them through: with no
+writable cache folder, ``njit(cache=True)`` raises ``RuntimeError`` ("no locator available")
+when a module defines its kernels, so every command that imports them dies; and a damaged
+index or data file raises (``UnpicklingError``, ``EOFError``, ...) from the dispatcher's
+compile on every later run, since numba neither recompiles nor rewrites the entry. So ``jit``
+below compiles without numba's ``cache`` option and attaches the cache itself, as numba's
+``Dispatcher.enable_caching`` does: it sets the dispatcher's ``_cache`` attribute to a
+subclass of ``FunctionCache`` whose ``load_overload`` turns any error into a miss (and
+``flush``, which writes an empty index, so that the save after the recompile does not trip
+over the damaged index again) and whose ``save_overload`` turns an error into a note. If no
+locator is usable, the dispatcher keeps the ``NullCache`` it was built with. The reason in
+the note comes from the stamped locators' ``ensure_cache_path``, which numba's
+``from_function`` calls to test a folder and which raises ``OSError`` when it is not
+writable. Relied on, and identical in numba 0.60.0, 0.63.1 and 0.68.1 (read for this), where
+``Cache`` and ``IndexDataCacheFile`` did not change at all: ``caching.FunctionCache`` (its
+constructor taking the Python function; ``load_overload``, ``save_overload``, ``flush``,
+``cache_path``), the ``RuntimeError`` from its constructor when no locator applies,
+``_CacheLocator.ensure_cache_path`` and ``get_cache_path``, and ``Dispatcher._cache`` /
+``py_func``. Each is looked up with ``getattr``; without them tracer caches nothing.
 """
 
 from __future__ import annotations
 
 import functools
 import hashlib
+import os
+import sys
+import threading
 from pathlib import Path
 
 from numba import njit
 
 PACKAGE = Path(__file__).resolve().parent
+
+_NOTED: set[str] = set()
+_NOTE_LOCK = threading.Lock()
+
+
+def _note(kind: str, text: str) -> None:
+    """Print ``tracer: note: text`` on stderr, once per process for each kind of note."""
+    with _NOTE_LOCK:
+        if kind in _NOTED:
+            return
+        _NOTED.add(kind)
+    print(f"tracer: note: {text}", file=sys.stderr, flush=True)
+
+
+def _describe(exc: BaseException) -> str:
+    """An exception as one short line: its type, then its message if it has one."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+# While ``_attach_cache`` builds a cache, the folders numba's locators tried and why each was
+# refused, as (folder, OSError); None at other times. Per thread: modules may import in parallel.
+_REFUSALS = threading.local()
+
+
+def _refused(cache_path: str, exc: OSError) -> None:
+    log = getattr(_REFUSALS, "log", None)
+    if log is not None:
+        log.append((cache_path, exc))
+
+
+def _why_unwritable(refusals: list[tuple[str, OSError]]) -> str:
+    """The refused folders as ``folder: reason; ...``, naming the folder that could not be
+    created or written (the missing ancestor makedirs stopped at, if it says so), each once."""
+    parts: dict[str, str] = {}
+    for cache_path, exc in refusals:
+        where = cache_path
+        if exc.filename and Path(cache_path).is_relative_to(os.fspath(exc.filename)):
+            where = os.fspath(exc.filename)
+        parts.setdefault(where, (exc.strerror or _describe(exc)).lower())
+    if not parts:
+        return "no cache folder is writable"
+    return "; ".join(f"{where}: {reason}" for where, reason in parts.items())
 
 
 def _is_ours(py_file: str) -> bool:
@@ -100,6 +170,13 @@ def _install_package_stamp() -> bool:
                     return None
                 return super().from_function(py_func, py_file)
 
+            def ensure_cache_path(self):
+                try:
+                    super().ensure_cache_path()
+                except OSError as exc:
+                    _refused(self.get_cache_path(), exc)
+                    raise
+
         PackageStamped.__name__ = PackageStamped.__qualname__ = (
             f"TracerStamped{base.__name__.lstrip('_')}"
         )
@@ -112,6 +189,70 @@ def _install_package_stamp() -> bool:
     return True
 
 
-CACHE = _install_package_stamp()
+def _tolerant_cache_class():
+    """numba's ``FunctionCache`` with its failures turned into cache misses and notes, or None
+    if this numba lacks it."""
+    try:
+        from numba.core import caching
+    except ImportError:  # pragma: no cover - numba without its caching module
+        return None
+    base = getattr(caching, "FunctionCache", None)
+    if base is None or not all(hasattr(base, name) for name in ("load_overload", "save_overload",
+                                                                 "flush", "cache_path")):
+        return None
 
-jit = njit(cache=CACHE, nogil=True, error_model="numpy", inline="always")
+    class TracerFunctionCache(base):
+        def load_overload(self, sig, target_context):
+            try:
+                return super().load_overload(sig, target_context)
+            except Exception as exc:  # any damage to the index or the data file: a miss
+                _note("damaged", f"damaged compiled-kernel cache in {self.cache_path} "
+                                 f"({_describe(exc)}); recompiling and rewriting it")
+                try:
+                    self.flush()  # a fresh, empty index, so that the save after compiling works
+                except Exception:
+                    pass  # the save will fail too, and say so
+                return None
+
+        def save_overload(self, sig, data):
+            try:
+                super().save_overload(sig, data)
+            except Exception as exc:
+                _note("uncacheable", f"cannot cache compiled kernels (writing to {self.cache_path} "
+                                     f"failed: {_describe(exc)}); compiling each run (~20 s)")
+
+    return TracerFunctionCache
+
+
+CACHE = _install_package_stamp()
+_CACHE_CLASS = _tolerant_cache_class() if CACHE else None
+if _CACHE_CLASS is None:
+    CACHE = False
+
+_compile = njit(nogil=True, error_model="numpy", inline="always")
+
+
+def _attach_cache(dispatcher) -> None:
+    """Give a dispatcher tracer's cache, as numba's ``enable_caching`` gives it numba's. If no
+    cache folder is writable, the dispatcher keeps compiling in memory and one note per process
+    says which folders were refused and why."""
+    _REFUSALS.log = refusals = []
+    try:
+        cache = _CACHE_CLASS(dispatcher.py_func)
+    except Exception as exc:  # RuntimeError from numba: no locator, i.e. no writable folder
+        why = _why_unwritable(refusals) if isinstance(exc, RuntimeError) else _describe(exc)
+        _note("uncacheable", f"cannot cache compiled kernels ({why}); compiling each run "
+                             "(~20 s); set NUMBA_CACHE_DIR to a writable folder to keep them")
+        return
+    finally:
+        _REFUSALS.log = None
+    dispatcher._cache = cache
+
+
+def jit(py_func):
+    """Compile ``py_func`` with tracer's options (module docstring), cached on disk when a
+    cache folder is writable."""
+    dispatcher = _compile(py_func)
+    if CACHE and hasattr(dispatcher, "_cache"):
+        _attach_cache(dispatcher)
+    return dispatcher
