@@ -329,26 +329,36 @@ def test_batches_cover_every_sample_once_within_the_lane_bound(lanes):
 
 
 def test_render_refuses_to_add_samples_the_record_cannot_describe(tmp_path):
-    """A film that holds samples takes more only from the same estimator, sampler and seed at
-    fresh sample indices: another seed, repeated indices or another heuristic raise InputError
-    naming what differs, and the film is left as it was. A film interrupted in its first pass
-    (some pixels without samples) still counts as holding samples."""
+    """A film that holds samples takes more only from the same estimator, sampler and scene at
+    sample indices it does not hold: repeated indices, another heuristic or another scene raise
+    InputError naming what differs, and the film is left as it was; another seed is taken and
+    the record then lists both ranges. A film interrupted in its first pass (some pixels without
+    samples) still counts as holding samples."""
     from tracer.errors import InputError
 
     scene_path = tmp_path / "s.toml"
     scene_path.write_text(GOOD)
     scene = load_scene(scene_path)
+    (tmp_path / "other").mkdir()
+    brighter = _mutate("emission = [5.0, 5.0, 5.0]", "emission = [5.0, 5.0, 6.0]")
+    (tmp_path / "other" / "s.toml").write_text(brighter)
+    other_scene = load_scene(tmp_path / "other" / "s.toml")  # same file name, other content
     film = render(scene, Strategy("mis"), RenderSettings(spp=4, seed=1, threads=1)).film
     before = film.mean.copy()
-    for settings, strategy, words in [
-        (RenderSettings(spp=4, seed=2, threads=1, first_sample=4), Strategy("mis"), "seed 1"),
-        (RenderSettings(spp=4, seed=1, threads=1, first_sample=2), Strategy("mis"), "sample indices 0-3"),
-        (RenderSettings(spp=4, seed=1, threads=1, first_sample=4), Strategy("mis", "balance"),
+    for settings, strategy, where, words in [
+        (RenderSettings(spp=4, seed=1, threads=1, first_sample=2), Strategy("mis"), scene,
+         "sample indices 0-3 and 2-5 overlap"),
+        (RenderSettings(spp=4, seed=1, threads=1, first_sample=4), Strategy("mis", "balance"), scene,
          "tracer:heuristic"),
+        (RenderSettings(spp=4, seed=1, threads=1, first_sample=4), Strategy("mis"), other_scene,
+         "tracer:scene_digest"),
     ]:
         with pytest.raises(InputError, match=words):
-            render(scene, strategy, settings, film=film)
+            render(where, strategy, settings, film=film)
         assert np.array_equal(film.mean, before)
+    two_seeds = render(scene, Strategy("mis"), RenderSettings(spp=2, seed=7, threads=1),
+                       film=film.copy()).film
+    assert two_seeds.record.samples == ((1, 0, 4), (7, 0, 2)) and two_seeds.record.seed is None
     partial = Film(film.width, film.height)
     partial.add_block(0, np.ones((3, 1, 3)))  # three pixels of a first pass, the rest empty
     partial.record = film.record
@@ -443,7 +453,7 @@ def test_seeds_and_sample_indices_past_32_bits_round_trip(tmp_path):
                  "--quiet"]) == 0
     assert main(["reference", str(scene_path), "-o", str(out), "--spp", "1", "--resume", "--quiet"]) == 0
     film = read_exr(out)
-    assert film.record.seed == seed and film.sample_range() == (0, 2) and film.spp == 2
+    assert film.record.samples == ((seed, 0, 2),) and film.spp == 2
 
 
 def test_a_billion_spp_render_has_flat_memory_and_stops_on_ctrl_c(tmp_path):

@@ -98,7 +98,7 @@ def test_merge_command_and_its_refusals(tmp_path, capsys):
     assert (
         main(["merge", str(tmp_path / "a.exr"), str(tmp_path / "a.exr"), "-o", str(tmp_path / "x.exr")]) == 2
     )
-    assert "same seed and sample indices" in capsys.readouterr().err
+    assert "both hold the same samples" in capsys.readouterr().err
     assert (
         main(["merge", str(tmp_path / "a.exr"), str(tmp_path / "l.exr"), "-o", str(tmp_path / "x.exr")]) == 2
     )

@@ -52,8 +52,9 @@ def test_exr_round_trip(tmp_path):
     rng = np.random.default_rng(1)
     film, _ = _random_film(rng, width=6, height=4, k=9)
     film.record = RenderRecord(strategy="mis", heuristic="power", light_samples=2, bsdf_samples=3,
-                               one_sample=True, light_selection="uniform", sampler="independent", seed=5,
-                               first_sample=4, next_sample=13, seconds=1.5, scene="x.toml", version="0.1")
+                               one_sample=True, light_selection="uniform", sampler="independent",
+                               samples=((5, 4, 13), (2**40, 0, 9)), seconds=1.5, scene="x.toml",
+                               scene_digest="0f" * 32, version="0.1")
     path = tmp_path / "out.exr"
     write_exr(path, film)
 
@@ -127,6 +128,19 @@ DAMAGED = {
     "string seed": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4, "tracer:seed": "abc"}, None, "tracer:seed"),
     "NaN samples channel": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4}, np.array([4.0, np.nan, 4.0, 4.0]),
                             "channel 'samples' is not a sample count at pixel (1, 0)"),
+    "sample ranges not ranges": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4, "tracer:samples": "1:0-3;2"}, None,
+                                 "tracer:samples = '1:0-3;2' is not a valid samples"),
+    "sample ranges that overlap": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4, "tracer:samples": "1:0-3,1:2-5"},
+                                   None, "seed 1: sample indices 0-3 and 2-5 overlap"),
+    "sample ranges against the seed": (GOOD_MEAN, GOOD_VAR,
+                                       {"tracer:spp": 4, "tracer:samples": "1:0-3", "tracer:seed": 2}, None,
+                                       "tracer:samples (1:0-3) and tracer:seed/first_sample/next_sample"),
+    "next before first": (GOOD_MEAN, GOOD_VAR,
+                          {"tracer:spp": 4, "tracer:seed": 1, "tracer:first_sample": 9,
+                           "tracer:next_sample": 3},
+                          None, "are not a seed and a sample range"),
+    "scene digest not a digest": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4, "tracer:scene_digest": "abc"}, None,
+                                  "tracer:scene_digest = 'abc'"),
     "huge samples channel": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4}, np.array([4.0, 1e30, 4.0, 4.0]),
                              "channel 'samples' is not a sample count"),
 }

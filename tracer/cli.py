@@ -339,12 +339,18 @@ def cmd_reference(args: argparse.Namespace) -> int:
                              f"{scene.camera.width}x{scene.camera.height}", str(output))
         if film.record.strategy != "mis":
             raise InputError("--resume: not an MIS reference", str(output))
-        # Same seed, later sample indices: fresh random numbers that never repeat earlier ones.
-        seed, first = film.record.seed or 0, film.sample_range()[1]
+        # The reference's seed (its last one, if merged from several) from above every index it
+        # holds: fresh random numbers that never repeat the samples it has.
+        held = film.record.samples or ()
+        seed = film.record.seed if film.record.seed is not None else (held[-1][0] if held else 0)
+        first = film.record.fresh_start(seed)
         sampler = film.record.sampler or "independent"
     settings = RenderSettings(spp=args.spp, seed=seed, threads=args.threads, first_sample=first,
                               sampler=sampler)
-    result = render(scene, strategy, settings, film=film, progress=not args.quiet)
+    try:
+        result = render(scene, strategy, settings, film=film, progress=not args.quiet)
+    except InputError as exc:
+        raise InputError(f"--resume: {exc}" if film is not None else str(exc), str(output)) from None
     return _finish(result, scene, strategy, output, args.spp, args.quiet, args.exposure,
                    half=not args.float)
 
@@ -355,10 +361,7 @@ def cmd_merge(args: argparse.Namespace) -> int:
 
     output = _exr_path(args.output)
     a, b = read_exr(args.a), read_exr(args.b)
-    if (a.width, a.height) != (b.width, b.height):
-        raise InputError(f"cannot merge a {a.width}x{a.height} render with a {b.width}x{b.height} one",
-                         args.b)
-    merged = merge_renders(a, b)
+    merged = merge_renders(a, b, args.a, args.b)
     half = all(exr_is_half(p) for p in (args.a, args.b))
     if _write_outputs(merged, output, args.exposure, half):
         return EXIT_INTERRUPTED

@@ -81,20 +81,19 @@ class Film:
         """(H, W, 3) float64 pixel means."""
         return self.mean.reshape(self.height, self.width, 3)
 
-    def sample_range(self) -> tuple[int, int]:
-        """(first, next) sample indices drawn with the record's seed."""
-        return self.record.sample_range(self.spp)
 
-
-def merge_renders(a: Film, b: Film) -> Film:
+def merge_renders(a: Film, b: Film, name_a: str = "the first render",
+                  name_b: str = "the second render") -> Film:
     """A new film pooling renders ``a`` and ``b``, after checking that their records allow it
-    (same scene and estimator, disjoint samples: ``tracer.record.check_mergeable``)."""
+    (same scene and estimator, disjoint samples: ``tracer.record.check_mergeable``, whose
+    message names them ``name_a`` and ``name_b``)."""
     if (a.width, a.height) != (b.width, b.height):
-        raise InputError(f"cannot merge a {a.width}x{a.height} render with a {b.width}x{b.height} one")
-    check_mergeable(a.record, a.spp, b.record, b.spp)
+        raise InputError(f"cannot pool {name_a} ({a.width}x{a.height}) and {name_b} "
+                         f"({b.width}x{b.height}): different resolutions")
+    check_mergeable(a.record, b.record, name_a, name_b)
     pooled = a.copy()
     pooled.merge(b)
-    pooled.record = merged(a.record, a.spp, b.record, b.spp)
+    pooled.record = merged(a.record, b.record)
     return pooled
 
 

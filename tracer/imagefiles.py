@@ -85,10 +85,6 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
         raise InputError(f"missing channel(s) {', '.join(missing)} (has {', '.join(names)})", path)
     data = np.asarray(data, dtype=np.float64).reshape(spec.height * spec.width, spec.nchannels)
     attributes = {a.name: a.value for a in spec.extra_attribs if a.name.startswith("tracer:")}
-    try:
-        record = RenderRecord.from_attributes(attributes)
-    except InputError as exc:
-        raise InputError(str(exc), path) from None
     spp = _sample_count(attributes.get(SPP_ATTRIBUTE, 0), path)
     if COUNT_CHANNEL in names:
         counts = data[:, names.index(COUNT_CHANNEL)]
@@ -107,6 +103,11 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
         if bad.any():
             raise InputError(f"{label} is not a finite{' non-negative' if label == 'variance' else ''} "
                              f"number at {_pixel(bad, spec.width)}: {values[np.argmax(bad)].tolist()}", path)
+    try:
+        # A file that names no sample range holds samples 0 .. (its largest count) - 1.
+        record = RenderRecord.from_attributes(attributes, int(count.max()) if len(count) else 0)
+    except InputError as exc:
+        raise InputError(str(exc), path) from None
     m2 = var * np.maximum(count - 1, 0)[:, None]
     return Film(spec.width, spec.height, count, mean, m2, record)
 

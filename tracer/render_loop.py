@@ -26,7 +26,7 @@ from .errors import InputError
 from .estimators import DirectLighting
 from .film import Film
 from .jit import jit
-from .record import RenderRecord, check_mergeable
+from .record import RenderRecord, check_mergeable, merged
 from .scene import Scene
 from .strategy import Strategy
 
@@ -150,11 +150,11 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     """Render ``settings.spp`` samples per pixel into ``film`` (a new one if None).
 
     The film's record (``tracer.record``) is set to describe all it holds: the strategy and
-    sampler, the seed, the sample indices from the earliest a film passed in held to the last
-    drawn now, and the seconds of both. A film that already holds samples must have been made
-    by the same estimator and sampler with the same seed and sample indices below
-    ``settings.first_sample`` (``InputError`` otherwise: its record could not say what the film
-    holds). Ctrl-C stops the render, also during the first compilation: batches already running
+    sampler, the scene's digest, the sample ranges a film passed in held plus the one drawn now,
+    and the seconds of both. A film that already holds samples must have been made by the same
+    estimator and sampler on the same scene, and must not hold any of the samples to be drawn
+    (``InputError`` otherwise: its record could not say what the film holds). Ctrl-C stops the
+    render, also during the first compilation: batches already running
     finish and are kept, the rest are dropped, and the result says ``interrupted``.
     """
     last = settings.first_sample + settings.spp
@@ -166,7 +166,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     runs = estimator.strategy if estimator is not None else strategy
     earlier = film.record if bool(film.count.any()) else None
     if earlier is not None:
-        _check_continues(earlier, film, scene, runs, settings)
+        _check_continues(earlier, scene, runs, settings)
     sampler = samplers.make(settings.sampler, settings.seed)
     bar = None
     nonfinite = 0
@@ -223,42 +223,27 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     finally:
         if bar is not None:
             bar.close()
-    film.record = _record(scene, runs, settings, film, seconds, earlier)
+    film.record = _record(scene, runs, settings, seconds, earlier)
     return RenderResult(film, seconds, samples, nonfinite, interrupted)
 
 
-def _check_continues(earlier: RenderRecord, film: Film, scene: Scene, strategy: Strategy,
+def _check_continues(earlier: RenderRecord, scene: Scene, strategy: Strategy,
                      settings: RenderSettings) -> None:
-    """Refuse to add samples to a film whose record says it was made otherwise: another seed,
-    sample indices that the new ones would repeat, another estimator, sampler or scene file
-    (``record.check_mergeable``)."""
-    if earlier.seed is not None and earlier.seed != settings.seed:
-        raise InputError(f"the film holds samples of seed {earlier.seed}; adding seed {settings.seed} "
-                         "would leave its record unable to say which samples it holds: render apart "
-                         "and merge")
-    first, next_sample = earlier.sample_range(film.spp)
-    if settings.first_sample < next_sample and first < settings.first_sample + settings.spp:
-        raise InputError(f"the film already holds sample indices {first}-{next_sample - 1} of seed "
-                         f"{settings.seed}; start at {next_sample} (first_sample) for fresh samples")
+    """Refuse to add samples to a film whose record says it was made otherwise: another
+    estimator, sampler or scene, or sample indices of this seed that it already holds
+    (``record.check_mergeable``); its record could not then say what it holds."""
     new = RenderRecord.of_render(strategy, settings.sampler, settings.seed, settings.first_sample,
-                                 settings.spp, 0.0, scene.path)
-    try:
-        check_mergeable(earlier, film.spp, new, settings.spp)
-    except InputError as exc:
-        raise InputError(f"cannot add samples to this film: {exc}") from None
+                                 settings.spp, 0.0, scene)
+    check_mergeable(earlier, new, "the film", "the samples to add")
 
 
-def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Film, seconds: float,
+def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, seconds: float,
             earlier: RenderRecord | None) -> RenderRecord:
-    """The record of ``film`` after a render of ``settings.spp`` samples from
-    ``settings.first_sample``: spanning the samples of the ``earlier`` record too."""
+    """The record of a film after a render of ``settings.spp`` samples from
+    ``settings.first_sample`` into it: the new range joined to the ``earlier`` record's."""
     record = RenderRecord.of_render(strategy, settings.sampler, settings.seed, settings.first_sample,
-                                    settings.spp, seconds, scene.path)
-    if earlier is not None:
-        first, _ = earlier.sample_range(film.spp)
-        record.first_sample = min(first, settings.first_sample)
-        record.seconds = seconds + (earlier.seconds or 0.0)
-    return record
+                                    settings.spp, seconds, scene)
+    return merged(record, earlier) if earlier is not None else record
 
 
 def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: Iterator[Batch],

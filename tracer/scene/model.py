@@ -8,7 +8,9 @@ so that light techniques that sample a shape as a whole can find it.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -108,6 +110,35 @@ class Scene:
     @property
     def name(self) -> str:
         return Path(self.path).stem
+
+    @cached_property
+    def digest(self) -> str:
+        """SHA-256 (hex) of what the scene renders: the camera (not its resolution), the
+        triangles with their materials and emission, the shapes they group into, the material
+        table and the point lights, each at the precision the renderer holds it. Two files that
+        render the same thing share it, wherever they live and whatever their comments say;
+        the render record carries it, so that merges and comparisons refuse other scenes.
+        Computed once (the scene's arrays are not meant to change after loading)."""
+        digest = hashlib.sha256(b"tracer scene digest 1\0")
+
+        def add(label: str, values, dtype: str) -> None:
+            array = np.ascontiguousarray(values, dtype=dtype)  # fixed byte order: same on every machine
+            digest.update(f"{label}{array.shape}\0".encode())
+            digest.update(array.tobytes())
+
+        cam = self.camera
+        add("camera", np.concatenate([cam.origin, cam.target, cam.up, [cam.fov]]), "<f8")
+        add("vertices", self.vertices, "<f4")
+        add("faces", self.faces, "<i8")
+        add("material", self.material, "<i4")
+        add("emission", self.emission, "<f4")
+        add("shape_of_triangle", self.shape_of_triangle, "<i4")
+        digest.update(("shapes " + ",".join(s.type for s in self.shapes) + "\0").encode())
+        add("material_kinds", self.materials.kind, "<i1")
+        add("material_params", self.materials.params, "<f8")
+        add("point_position", self.point_position, "<f4")
+        add("point_intensity", self.point_intensity, "<f4")
+        return digest.hexdigest()
 
     @property
     def light_of_triangle(self) -> np.ndarray:

@@ -29,7 +29,6 @@ the block mean is the sum of the sub-pixel variances over (downsample^2)^2.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import os
@@ -42,7 +41,7 @@ import numpy as np
 
 from ..atomic import write_text
 from ..errors import InputError
-from ..film import Film
+from ..film import Film, merge_renders
 from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
 from ..render_loop import RenderSettings, render
 from ..scene import Scene, default_scene_path, load_scene
@@ -267,7 +266,7 @@ def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) ->
     scene = load_scene(scene_path(entry, base), reference.width // f, reference.height // f)
     ref_mean, ref_var, ref_sample_var = downsampled_reference(reference, f, exr_is_half(ref_path))
     strategy = entry.strategy_object()
-    pooled = Film(scene.camera.width, scene.camera.height)
+    pooled: Film | None = None
     relmse, variance, seconds = [], [], 0.0
     for seed in entry.seeds:
         result = render(
@@ -275,13 +274,9 @@ def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) ->
         )
         relmse.append(metrics.relmse(result.film.mean, ref_mean))
         variance.append(metrics.variance(result.film))
-        pooled.merge(result.film)
+        # Distinct seeds: the pool's record lists each seed's range (record.merged).
+        pooled = result.film if pooled is None else merge_renders(pooled, result.film)
         seconds += result.seconds
-    # The pool holds several seeds' samples: its record keeps the estimator and drops the seed
-    # and sample range, which no single seed describes.
-    pooled.record = dataclasses.replace(
-        result.film.record, seed=None, first_sample=None, next_sample=None, seconds=seconds
-    )
     return Measurement(
         np.array(relmse), np.array(variance), pooled, ref_mean, ref_var, ref_sample_var, scene, seconds
     )
