@@ -179,3 +179,19 @@ def test_damaged_baseline_is_refused_with_the_key(case, tmp_path):
     good = tmp_path / "good.json"
     good.write_text(json.dumps({"entries": [GOOD_ENTRY]}))
     assert load_baseline(good)[0].spp == 16
+
+
+def test_a_reference_of_another_scene_is_refused(baseline_copy, capsys):
+    """An entry for cornell whose reference is veach_mis's (same size, both square): the check
+    refuses it before rendering, exit 2, one line naming the reference file and
+    tracer:scene_digest. Before the digest the check measured cornell against veach_mis and
+    reported the noise as a regression (or a pass), whichever it happened to be."""
+    doc = json.loads(baseline_copy.read_text())
+    entry = next(e for e in doc["entries"] if e["scene"] == "cornell")
+    entry["reference"] = "references/veach_mis.exr"
+    doc["entries"] = [entry]
+    baseline_copy.write_text(json.dumps(doc))
+    capsys.readouterr()
+    assert main(["check", "--baseline", str(baseline_copy)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "veach_mis.exr: tracer:scene_digest" in err[0], err

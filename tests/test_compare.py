@@ -35,7 +35,7 @@ def test_metric_formulas_on_known_arrays():
     # Pixel 0: sample variance 2, over 2 samples -> 1; pixel 1: 0. Mean over pixels and channels: 0.5.
     assert metrics.variance(film) == pytest.approx(0.5)
     assert metrics.efficiency(0.5, 4.0) == pytest.approx(0.5)
-    assert metrics.efficiency(0.0, 1.0) == float("inf")
+    assert np.isnan(metrics.efficiency(0.0, 1.0)) and np.isnan(metrics.efficiency(-1e-3, 1.0))
 
 
 def test_efficiency_ratio_map_signs():
@@ -142,9 +142,10 @@ def test_equal_time_spends_the_budget(monkeypatch):
 
 
 def test_compare_writes_every_file_and_true_numbers(tmp_path):
-    """End to end at 24x16: every promised file exists, index.html links only to files that
-    exist, every run's EXR carries its render record, and MSE/relMSE in metrics.json match an
-    independent computation from the EXRs."""
+    """End to end at 24x24: every promised file exists, index.html links only to files that
+    exist, every run's EXR carries its render record, metrics.json is strict JSON, and
+    MSE/relMSE in it match an independent computation from the EXRs (the reference's variance
+    of the pixel value subtracted; as measured in *_uncorrected)."""
     scene = str(SCENES / "veach_mis.toml")
     ref = tmp_path / "ref.exr"
     assert (
@@ -157,7 +158,7 @@ def test_compare_writes_every_file_and_true_numbers(tmp_path):
                 "--width",
                 "24",
                 "--height",
-                "16",
+                "24",
                 "--spp",
                 "64",
                 "--quiet",
@@ -197,7 +198,7 @@ def test_compare_writes_every_file_and_true_numbers(tmp_path):
     links = re.findall(r'(?:src|href)="([^"]+)"', page)
     assert links and all(not link.startswith(("/", "http")) and (out / link).is_file() for link in links)
 
-    doc = json.loads((out / "metrics.json").read_text())
+    doc = json.loads((out / "metrics.json").read_text(), parse_constant=_no_constants)
     assert doc["mode"]["kind"] == "equal-spp" and [r["strategy"] for r in doc["results"]] == names
     assert {"strategy", "heuristic", "spp", "seconds", "mse", "relmse", "variance", "efficiency"} <= set(
         doc["results"][0]
@@ -214,13 +215,27 @@ def test_compare_writes_every_file_and_true_numbers(tmp_path):
         return px[..., [names_.index(c) for c in "RGB"]].astype(np.float64)
 
     reference = channels(ref)
+    buf = oiio.ImageBuf(str(ref))
+    ref_names = list(buf.spec().channelnames)
+    ref_var = buf.get_pixels(oiio.FLOAT)[..., [ref_names.index(f"variance.{c}") for c in "RGB"]] / 64.0
+    noise = np.mean(ref_var / (reference**2 + 0.01))
+    assert doc["reference_noise"]["relmse"] == pytest.approx(noise, rel=1e-5)
     for row in doc["results"]:
         image = channels(out / f"{row['strategy']}.exr")
-        assert row["mse"] == pytest.approx(np.mean((image - reference) ** 2), rel=1e-5)
-        assert row["relmse"] == pytest.approx(
-            np.mean((image - reference) ** 2 / (reference**2 + 0.01)), rel=1e-5
-        )
-        assert row["efficiency"] == pytest.approx(1.0 / (row["relmse"] * row["seconds"]), rel=1e-9)
+        squared = (image - reference) ** 2
+        assert row["mse_uncorrected"] == pytest.approx(np.mean(squared), rel=1e-5)
+        assert row["mse"] == pytest.approx(np.mean(squared - ref_var), rel=1e-4, abs=1e-12)
+        assert row["relmse_uncorrected"] == pytest.approx(np.mean(squared / (reference**2 + 0.01)), rel=1e-5)
+        assert row["relmse"] == pytest.approx(np.mean((squared - ref_var) / (reference**2 + 0.01)),
+                                              rel=1e-4, abs=1e-12)
+        if row["relmse"] > 0:
+            assert row["efficiency"] == pytest.approx(1.0 / (row["relmse"] * row["seconds"]), rel=1e-9)
+        else:
+            assert row["efficiency"] is None
+
+
+def _no_constants(name):
+    raise AssertionError(f"metrics.json holds {name}, which is not JSON")
 
 
 def test_compare_rejects_bad_input(tmp_path, capsys):
@@ -236,3 +251,116 @@ def test_compare_rejects_bad_input(tmp_path, capsys):
     assert "unknown strategy 'fast'" in capsys.readouterr().err
     assert main(["compare", scene, "--reference", str(ref), "--spp", "1", "--crop", "4,4,8,8"]) == 2
     assert "leaves the 8x8 image" in capsys.readouterr().err
+
+
+def test_compare_refuses_a_reference_of_another_scene_or_frame(tmp_path, capsys):
+    """A reference of cornell given for veach_mis (same 16x16 size) is refused naming
+    tracer:scene_digest (it was accepted: relMSE 13-95, exit 0); a cornell reference of another
+    aspect ratio (16x8 for a square camera) is refused instead of rendering a squashed image;
+    one of the same frame at another size is used, with a note."""
+    cornell, veach = str(SCENES / "cornell.toml"), str(SCENES / "veach_mis.toml")
+    for name, size in (("square", ("16", "16")), ("wide", ("16", "8"))):
+        assert main(["reference", cornell, "-o", str(tmp_path / f"{name}.exr"), "--width", size[0],
+                     "--height", size[1], "--spp", "2", "--quiet"]) == 0
+    out = tmp_path / "cmp"
+    common = ["--spp", "1", "--strategies", "light", "--out", str(out)]
+    assert main(["compare", veach, "--reference", str(tmp_path / "square.exr"), *common, "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "square.exr: tracer:scene_digest" in err and len(err.strip().splitlines()) == 1, err
+    assert main(["compare", cornell, "--reference", str(tmp_path / "wide.exr"), *common, "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "wide.exr: the reference is 16x8, the scene's camera 256x256" in err, err
+    assert not out.exists()
+    assert main(["compare", cornell, "--reference", str(tmp_path / "square.exr"), *common]) == 0
+    assert "rendering at the reference's 16x16, not the scene's 256x256" in capsys.readouterr().err
+
+
+def test_reference_noise_correction_is_unbiased():
+    """Synthetic pixels with known truth mu: image I = mu + N(0, 0.2^2), reference R = mean of
+    n = 4 draws of mu + N(0, 1), its variance of the mean estimated from those draws. The
+    corrected MSE (mean of (I - R)^2 - s_R^2 / n) estimates E[(I - mu)^2] = 0.04 without bias,
+    while the uncorrected one is 0.04 + 0.25. Compared with a z-test at 5 standard errors
+    (the per-pixel terms are i.i.d. with finite variance, 200,000 of them: the mean is normal
+    to far better than needed); the uncorrected value is 0.25 / SE ~ 200 SE away, so the test
+    fails whenever the correction is missing."""
+    rng = np.random.default_rng(7)
+    pixels, n = 200_000, 4
+    mu = rng.uniform(0.0, 2.0, size=(pixels, 3))
+    image = mu + rng.normal(0.0, 0.2, size=mu.shape)
+    draws = mu[None] + rng.normal(0.0, 1.0, size=(n,) + mu.shape)
+    reference = draws.mean(axis=0)
+    reference_variance = draws.var(axis=0, ddof=1) / n
+    terms = (image - reference) ** 2 - reference_variance
+    standard_error = terms.std(ddof=1) / np.sqrt(terms.size)
+    corrected = metrics.mse(image, reference, reference_variance)
+    assert corrected == pytest.approx(terms.mean())
+    assert abs(corrected - 0.04) < 5 * standard_error
+    assert abs(metrics.mse(image, reference) - 0.04) > 50 * standard_error
+
+
+NO_LIGHTS = """
+[camera]
+origin = [0.0, 1.0, 3.0]
+target = [0.0, 0.5, 0.0]
+fov = 40.0
+width = 8
+height = 8
+
+[materials.white]
+type = "diffuse"
+reflectance = [0.7, 0.7, 0.7]
+
+[[shapes]]
+type = "quad"
+origin = [-1.0, 0.0, -1.0]
+edge1 = [0.0, 0.0, 2.0]
+edge2 = [2.0, 0.0, 0.0]
+material = "white"
+"""
+
+
+def test_undefined_numbers_are_null_in_json_and_n_a_in_tables(tmp_path, capsys):
+    """A scene without lights: every image is exactly black, relMSE 0, efficiency undefined.
+    metrics.json must stay strict JSON (null, not NaN or Infinity, which it held before), the
+    CSV cell empty, and the table on stderr and in index.html say n/a."""
+    scene = tmp_path / "dark.toml"
+    scene.write_text(NO_LIGHTS)
+    ref, out = tmp_path / "ref.exr", tmp_path / "cmp"
+    assert main(["reference", str(scene), "-o", str(ref), "--spp", "2", "--quiet"]) == 0
+    assert main(["compare", str(scene), "--reference", str(ref), "--spp", "1", "--strategies", "light,mis",
+                 "--out", str(out), "--sweep"]) == 0
+    assert re.search(r"light\s+1\s+\S+\s+0\s+n/a", capsys.readouterr().err)
+    text = (out / "metrics.json").read_text()
+    doc = json.loads(text, parse_constant=_no_constants)
+    assert [r["efficiency"] for r in doc["results"]] == [None, None]
+    assert all(r["relmse"] == 0.0 for r in doc["results"])
+    header, first = (out / "metrics.csv").read_text().splitlines()[:2]
+    assert first.split(",")[header.split(",").index("efficiency")] == ""
+    assert "<td>n/a</td>" in (out / "index.html").read_text()
+
+
+def test_an_interrupted_comparison_writes_no_results(tmp_path, monkeypatch, capsys):
+    """Ctrl-C during an equal-time comparison (injected: the third render reports that it was
+    interrupted, as render() does after a signal) stops it: exit 130, a line saying so, and no
+    metrics or report written. Before, the interrupted chunk was counted and the comparison ran
+    on to report an equal-time result."""
+    scene = str(SCENES / "cornell.toml")
+    ref, out = tmp_path / "ref.exr", tmp_path / "cmp"
+    assert main(["reference", scene, "-o", str(ref), "--width", "8", "--height", "8", "--spp", "2",
+                 "--quiet"]) == 0
+    calls = []
+    real_render = compare_mod.render
+
+    def render_interrupted_on_third_call(*args, **kwargs):
+        result = real_render(*args, **kwargs)
+        calls.append(1)
+        if len(calls) == 3:
+            result.interrupted = True
+        return result
+
+    monkeypatch.setattr(compare_mod, "render", render_interrupted_on_third_call)
+    capsys.readouterr()
+    assert main(["compare", scene, "--reference", str(ref), "--time", "0.5", "--out", str(out),
+                 "--quiet"]) == 130
+    assert "interrupted: the comparison is incomplete, nothing written" in capsys.readouterr().err
+    assert not out.exists() and len(calls) == 3

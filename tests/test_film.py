@@ -166,3 +166,30 @@ def test_half_reference_of_a_bright_emitter_stays_finite(tmp_path):
     write_exr(tmp_path / "ref.exr", film, half=True)
     back = read_exr(tmp_path / "ref.exr")
     assert np.all(np.isfinite(back.mean)) and back.mean[0, 0] == 1e5
+
+
+def test_damaged_header_bytes_give_one_line_not_a_traceback(tmp_path):
+    """Bytes of a good render's header overwritten (with text and with 0xff, at offsets across
+    the header): each read either succeeds with finite data or raises InputError naming the
+    file in one line. OpenImageIO's messages could span lines, and 0xff in an attribute made
+    them undecodable (a UnicodeDecodeError traceback), before its errors were read through one
+    guarded helper."""
+    rng = np.random.default_rng(2)
+    film, _ = _random_film(rng, width=5, height=3, k=4)
+    good = tmp_path / "good.exr"
+    write_exr(good, film)
+    data = good.read_bytes()
+    outcomes = {"read": 0, "refused": 0}
+    for offset in range(8, 400, 16):
+        for fill in (b"x", b"\xff"):
+            damaged = tmp_path / "damaged.exr"
+            damaged.write_bytes(data[:offset] + fill * 40 + data[offset + 40:])
+            try:
+                back = read_exr(damaged)
+            except InputError as exc:
+                assert str(exc).startswith(str(damaged)) and "\n" not in str(exc)
+                outcomes["refused"] += 1
+            else:
+                assert np.all(np.isfinite(back.mean)) and np.all(np.isfinite(back.variance()))
+                outcomes["read"] += 1
+    assert outcomes["refused"] > 0

@@ -108,15 +108,20 @@ def read_image(path: str | os.PathLike[str]) -> Image:
 def compare(image: Image, reference: Image, seconds: float | None = None) -> dict[str, float]:
     """The noise measures of ``image`` against ``reference`` (same resolution), as ``tracer
     compare`` reports them: ``mse`` = mean (I - R)^2, ``relmse`` = mean (I - R)^2 / (R^2 + 0.01),
-    ``variance`` = mean variance of the pixel value, ``efficiency`` = 1 / (relmse x seconds)
-    (seconds: the image's own unless given)."""
+    each less the reference's own variance (``tracer.study.metrics``: unbiased for the image's
+    error; ``*_uncorrected`` as measured), ``variance`` = mean variance of the pixel value,
+    ``efficiency`` = 1 / (relmse x seconds), NaN if relmse is not positive (seconds: the
+    image's own unless given)."""
     from .study import metrics
 
     if image.mean.shape != reference.mean.shape:
         raise ValueError(f"image {image.mean.shape[:2]} and reference {reference.mean.shape[:2]} "
                          "differ in size")
-    relmse = metrics.relmse(image.mean, reference.mean)
+    noise = reference.variance_of_mean
+    relmse = metrics.relmse(image.mean, reference.mean, noise)
     seconds = image.seconds if seconds is None else seconds
-    return {"mse": metrics.mse(image.mean, reference.mean), "relmse": relmse,
+    return {"mse": metrics.mse(image.mean, reference.mean, noise), "relmse": relmse,
             "variance": float(np.mean(image.variance_of_mean)),
-            "efficiency": metrics.efficiency(relmse, seconds)}
+            "efficiency": metrics.efficiency(relmse, seconds),
+            "mse_uncorrected": metrics.mse(image.mean, reference.mean),
+            "relmse_uncorrected": metrics.relmse(image.mean, reference.mean)}

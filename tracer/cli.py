@@ -59,10 +59,18 @@ def _crop(text: str) -> tuple[int, int, int, int]:
     return x, y, w, h
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: what is wrong and where to look, not the whole usage
+    (which --help prints). Subcommand parsers are made of this class too."""
+
+    def error(self, message: str):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .strategy import STRATEGIES
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="tracer", description="Direct-lighting path tracer for comparing sampling strategies.")
     parser.add_argument("--version", action="version", version=f"tracer {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -298,8 +306,9 @@ def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, 
               file=sys.stderr)
     if not quiet or result.interrupted:
         rate = result.samples / max(result.seconds, 1e-9)
-        note = f" (interrupted: {result.samples // (film.width * film.height)} of {asked_spp} spp added)" \
-            if result.interrupted else ""
+        # The file's tracer:spp is the smallest count; a pass cut short leaves some pixels more.
+        note = (f" (interrupted, {asked_spp} spp were asked: every pixel holds {film.spp} spp or more, "
+                f"up to {int(film.count.max())})") if result.interrupted else ""
         print(f"{scene.name}: {film.width}x{film.height}, {film.spp} spp, {strategy.label}{note}: "
               f"{result.seconds:.2f} s, {rate / 1e6:.2f} M samples/s -> {output}, {png}",
               file=sys.stderr)
@@ -372,10 +381,9 @@ def cmd_merge(args: argparse.Namespace) -> int:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     from .imagefiles import read_exr
-    from .scene import load_scene
     from .strategy import STRATEGIES, Strategy
     from .study import report
-    from .study.compare import ALLOCATIONS, Comparison
+    from .study.compare import ALLOCATIONS, Comparison, scene_for_reference
 
     names = [n.strip() for n in args.strategies.split(",") if n.strip()]
     unknown = [n for n in names if n not in STRATEGIES]
@@ -383,7 +391,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         raise InputError(f"--strategies: unknown strategy '{unknown[0] if unknown else ''}' "
                          f"(expected some of {', '.join(STRATEGIES)})", "command line")
     reference = read_exr(args.reference)
-    scene = load_scene(args.scene, reference.width, reference.height)
+    scene = scene_for_reference(args.scene, args.reference, reference, quiet=args.quiet)
     for x, y, w, h in args.crop or []:
         if x + w > reference.width or y + h > reference.height:
             raise InputError(f"--crop {x},{y},{w},{h} leaves the {reference.width}x{reference.height} image",
@@ -401,25 +409,54 @@ def cmd_compare(args: argparse.Namespace) -> int:
     mode = report.describe_mode(args.spp, args.time)
     if not args.quiet:
         print(f"{scene.name}: {mode['description']} at {reference.width}x{reference.height}", file=sys.stderr)
-    runs = [run(_strategy_from(args, name)) for name in names]
-    sweep, allocation = [], []
-    if args.sweep:
-        for name in names:
-            sweep += comparison.convergence(_strategy_from(args, name), max_spp=args.spp, budget=args.time)
-        allocation = [run(Strategy("mis", args.heuristic, n_light, n_bsdf,
-                                   light_selection=args.light_selection))
-                      for n_light, n_bsdf in ALLOCATIONS]
-    document = report.make_report(out, scene.name, args.reference, reference, runs, mode, sweep, allocation,
-                                  args.crop, args.exposure, args.target)
+    try:
+        runs = [run(_strategy_from(args, name)) for name in names]
+        sweep, allocation = [], []
+        if args.sweep:
+            for name in names:
+                sweep += comparison.convergence(_strategy_from(args, name), max_spp=args.spp,
+                                                budget=args.time)
+            allocation = [run(Strategy("mis", args.heuristic, n_light, n_bsdf,
+                                       light_selection=args.light_selection))
+                          for n_light, n_bsdf in ALLOCATIONS]
+    except KeyboardInterrupt:
+        # A strategy cut short would be compared at less time or fewer samples than the others.
+        print(f"tracer: interrupted: the comparison is incomplete, nothing written to {out}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    _warn_if_reference_is_noisy(comparison.reference_relmse, runs, args.reference)
+    # The report is many files; a signal while they are written is held until all are.
+    with interrupts.deferred() as arrived:
+        document = report.make_report(out, scene.name, args.reference, reference, runs, mode, sweep,
+                                      allocation, args.crop, args.exposure, args.target)
     if not args.quiet:
         width = max(len(r["name"]) for r in document["results"])
         print(f"\n{'strategy':<{width}}  {'spp':>6} {'seconds':>8} {'relMSE':>10} {'efficiency':>11}",
               file=sys.stderr)
         for r in document["results"]:
-            print(f"{r['name']:<{width}}  {r['spp']:>6} {r['seconds']:>8.2f} {r['relmse']:>10.4g} "
-                  f"{r['efficiency']:>11.4g}", file=sys.stderr)
+            print(f"{r['name']:<{width}}  {r['spp']:>6} {r['seconds']:>8.2f} "
+                  f"{report.number(r['relmse']):>10} {report.number(r['efficiency']):>11}", file=sys.stderr)
         print(f"-> {out / 'index.html'}", file=sys.stderr)
+    if arrived:
+        print(f"tracer: interrupted while writing the report; it was completed first: {out}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     return 0
+
+
+# The reference's own noise, as a share of a strategy's measured relMSE, above which compare
+# warns: the correction removes it on average, but the corrected value is then itself noisy.
+NOISY_REFERENCE_SHARE = 0.1
+
+
+def _warn_if_reference_is_noisy(reference_relmse: float, runs, reference_path: str) -> None:
+    """One warning line when the reference's noise is a noticeable share of some strategy's
+    measured (uncorrected) relMSE."""
+    worst = max(runs, key=lambda r: reference_relmse / max(r.measures["relmse_uncorrected"], 1e-300))
+    measured = worst.measures["relmse_uncorrected"]
+    if measured > 0.0 and reference_relmse > NOISY_REFERENCE_SHARE * measured:
+        print(f"tracer: warning: the reference's own noise (relMSE {reference_relmse:.3g}) is "
+              f"{min(reference_relmse / measured, 1.0):.0%} of {worst.strategy.label}'s measured error "
+              f"({measured:.3g}); it is subtracted from every error, but a longer reference would measure "
+              f"better: tracer reference ... --resume -o {reference_path}", file=sys.stderr)
 
 
 def cmd_check(args: argparse.Namespace) -> int:

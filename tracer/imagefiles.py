@@ -71,14 +71,15 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
         raise InputError("no such file", path)
     inp = oiio.ImageInput.open(path)
     if inp is None:
-        raise InputError(f"cannot read image: {oiio.geterror()}", path)
+        raise InputError(f"cannot read image: {_error_text(oiio)}", path)
     try:
         spec = inp.spec()
         data = inp.read_image(0, 0, 0, spec.nchannels, "float")
+        error = _error_text(inp) if data is None else ""
     finally:
         inp.close()
     if data is None:
-        raise InputError("cannot read image data", path)
+        raise InputError(f"cannot read image data{': ' + error if error else ''}", path)
     names = list(spec.channelnames)
     missing = [c for c in CHANNELS if c not in names]
     if missing:
@@ -112,6 +113,17 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
     return Film(spec.width, spec.height, count, mean, m2, record)
 
 
+def _error_text(source) -> str:
+    """OpenImageIO's pending error of ``source`` (the module or an image object), taken (so that
+    OpenImageIO does not print it again at exit) and made one printable line: a damaged header
+    can put bytes that are not UTF-8 into the message, which the binding fails to decode."""
+    try:
+        text = source.geterror()
+    except UnicodeDecodeError:
+        return "the file's header is damaged (its error message is not text)"
+    return " ".join(str(text).split())
+
+
 def _sample_count(value, path: str) -> int:
     """The header's ``tracer:spp`` as a count, or InputError naming it."""
     try:
@@ -136,7 +148,7 @@ def exr_is_half(path: str | os.PathLike[str]) -> bool:
 
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        raise InputError(f"cannot read image: {oiio.geterror()}", str(path))
+        raise InputError(f"cannot read image: {_error_text(oiio)}", str(path))
     try:
         spec = inp.spec()
         formats = list(spec.channelformats) or [spec.format] * spec.nchannels
@@ -174,11 +186,11 @@ def _write(path: str, spec: Any, pixels: np.ndarray) -> None:
 
     out = oiio.ImageOutput.create(path)
     if out is None:
-        raise InputError(f"cannot write images of this type: {oiio.geterror()}", path)
+        raise InputError(f"cannot write images of this type: {_error_text(oiio)}", path)
     ok = out.open(path, spec) and out.write_image(pixels)
-    error = out.geterror()
+    error = _error_text(out)
     closed = out.close()
     if not ok:
         raise InputError(f"cannot write: {error}", path)
     if not closed:
-        raise InputError(f"cannot write: {out.geterror() or 'error while closing the file'}", path)
+        raise InputError(f"cannot write: {_error_text(out) or 'error while closing the file'}", path)

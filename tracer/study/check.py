@@ -44,9 +44,10 @@ from ..errors import InputError
 from ..film import Film, merge_renders
 from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
 from ..render_loop import RenderSettings, render
-from ..scene import Scene, default_scene_path, load_scene
+from ..scene import Scene, default_scene_path
 from ..strategy import HEURISTICS, STRATEGIES, Strategy
 from . import metrics, statistics
+from .compare import scene_for_reference
 from .statistics import FAMILY_ALPHA
 
 PIXEL_PASS_SHARE = 0.9975  # Mitsuba 3's share of pixels that must pass the z-test
@@ -263,7 +264,7 @@ def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) ->
             f"reference {reference.width}x{reference.height} is not divisible by downsample {f}",
             str(ref_path),
         )
-    scene = load_scene(scene_path(entry, base), reference.width // f, reference.height // f)
+    scene = scene_for_reference(scene_path(entry, base), ref_path, reference, f, quiet=True)
     ref_mean, ref_var, ref_sample_var = downsampled_reference(reference, f, exr_is_half(ref_path))
     strategy = entry.strategy_object()
     pooled: Film | None = None

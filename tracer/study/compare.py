@@ -5,22 +5,60 @@ is the wall time of ``render()`` alone: the Embree scene is built once and share
 strategy pays the same setup and none is charged for it. Each run's film carries the render
 record that ``render()`` sets (strategy, seed, sample range, seconds), which the report writes
 into the run's EXR header.
+
+Errors are measured with the reference's own variance subtracted (``metrics``), so that a
+noisy reference does not make every strategy look worse by the same amount and hide their
+differences. A Ctrl-C (or SIGTERM) during any render stops the comparison with
+``KeyboardInterrupt``: a strategy interrupted mid-way would be compared at fewer samples or
+less time than the others, so no partial result is measured.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from ..embree import RayCaster
+from ..errors import InputError
 from ..estimators import DirectLighting
 from ..film import Film
 from ..render_loop import RenderSettings, render
-from ..scene import Scene
+from ..scene import Scene, load_scene
 from ..strategy import Strategy
 from . import metrics
+
+
+def scene_for_reference(scene_path: str | Path, reference_path: str | Path, reference: Film,
+                        downsample: int = 1, quiet: bool = False) -> Scene:
+    """The scene, loaded to render at the reference's resolution / ``downsample``, after
+    checking that the reference is of it: the same scene digest (when the reference records
+    one; otherwise a note says it cannot be checked) and the same aspect ratio as the scene's
+    camera, to within one pixel's rounding (a reference of the same frame at another size is
+    fine, and a note says so). ``InputError`` naming the reference file otherwise."""
+    scene = load_scene(scene_path)
+    digest = reference.record.scene_digest
+    if digest is not None and digest != scene.digest:
+        raise InputError(f"tracer:scene_digest: the reference is of another scene "
+                         f"({reference.record.scene}) than {scene_path}", str(reference_path))
+    if digest is None and not quiet:
+        print(f"tracer: note: {reference_path} does not record its scene's digest (made by another tool "
+              "or an older tracer): it cannot be checked to be of this scene", file=sys.stderr)
+    width, height = scene.camera.width, scene.camera.height
+    aspect = width / height
+    if abs(reference.width / reference.height - aspect) > aspect / min(reference.width, reference.height):
+        raise InputError(f"the reference is {reference.width}x{reference.height}, the scene's camera "
+                         f"{width}x{height}: another aspect ratio, so another image", str(reference_path))
+    size = (reference.width // downsample, reference.height // downsample)
+    if (reference.width, reference.height) != (width, height) and not quiet:
+        print(f"tracer: note: rendering at the reference's {reference.width}x{reference.height}, "
+              f"not the scene's {width}x{height}", file=sys.stderr)
+    scene.camera = dataclasses.replace(scene.camera, width=size[0], height=size[1])
+    return scene
+
 
 # (light, bsdf) samples per camera sample for the MIS allocation sweep: ratios 1:0 ... 0:1.
 ALLOCATIONS = ((4, 0), (3, 1), (2, 2), (1, 3), (0, 4))
@@ -41,14 +79,17 @@ class Run:
     def spp(self) -> int:
         return self.film.spp
 
-    def measure(self, reference: np.ndarray) -> dict[str, float]:
-        """mse, relmse, variance, efficiency against ``reference (P, 3)``."""
-        rel = metrics.relmse(self.film.mean, reference)
+    def measure(self, reference: np.ndarray, reference_variance: np.ndarray) -> dict[str, float]:
+        """mse, relmse (the reference's variance ``(P, 3)`` subtracted), variance, efficiency
+        against ``reference (P, 3)``, and mse and relmse as measured (``*_uncorrected``)."""
+        rel = metrics.relmse(self.film.mean, reference, reference_variance)
         self.measures = {
-            "mse": metrics.mse(self.film.mean, reference),
+            "mse": metrics.mse(self.film.mean, reference, reference_variance),
             "relmse": rel,
             "variance": metrics.variance(self.film),
             "efficiency": metrics.efficiency(rel, self.seconds),
+            "mse_uncorrected": metrics.mse(self.film.mean, reference),
+            "relmse_uncorrected": metrics.relmse(self.film.mean, reference),
         }
         return self.measures
 
@@ -64,6 +105,7 @@ class Comparison:
                              f"{cam.width}x{cam.height}")
         self.scene = scene
         self.reference = reference
+        self.reference_variance = reference.variance_of_mean()
         self.seed = seed
         self.threads = threads
         self.progress = progress
@@ -76,12 +118,28 @@ class Comparison:
         if self.progress:
             print(text, file=sys.stderr)
 
+    def _render(self, strategy: Strategy, settings: RenderSettings, film: Film | None,
+                estimator: DirectLighting, progress: bool = False):
+        """One render; an interrupted one stops the comparison (module docstring)."""
+        result = render(self.scene, strategy, settings, film=film, estimator=estimator, progress=progress)
+        if result.interrupted:
+            raise KeyboardInterrupt
+        return result
+
+    def _measure(self, run: Run) -> Run:
+        run.measure(self.reference.mean, self.reference_variance)
+        return run
+
+    @property
+    def reference_relmse(self) -> float:
+        """The reference's own noise on the relMSE scale (what the measures subtract)."""
+        return metrics.reference_relmse(self.reference.mean, self.reference_variance)
+
     def equal_spp(self, strategy: Strategy, spp: int) -> Run:
         """Render ``spp`` samples per pixel."""
-        result = render(self.scene, strategy, RenderSettings(spp=spp, seed=self.seed, threads=self.threads),
-                        estimator=self._estimator(strategy), progress=self.progress)
-        run = Run(strategy, result.film, result.seconds, result.nonfinite)
-        run.measure(self.reference.mean)
+        result = self._render(strategy, RenderSettings(spp=spp, seed=self.seed, threads=self.threads),
+                              None, self._estimator(strategy), self.progress)
+        run = self._measure(Run(strategy, result.film, result.seconds, result.nonfinite))
         self._say(f"  {strategy.label}: {run.spp} spp, {run.seconds:.2f} s, "
                   f"relMSE {run.measures['relmse']:.4g}")
         return run
@@ -104,13 +162,12 @@ class Comparison:
                     break
                 chunk = max(1, int(0.5 * left / per_spp)) if left > 2 * per_spp else 1
             settings = RenderSettings(spp=chunk, seed=self.seed, threads=self.threads, first_sample=spp)
-            result = render(self.scene, strategy, settings, film=film, estimator=estimator)
+            result = self._render(strategy, settings, film, estimator)
             film, spp = result.film, spp + chunk
             spent += result.seconds
             nonfinite += result.nonfinite
             per_spp = spent / spp
-        run = Run(strategy, film, spent, nonfinite, budget=budget)
-        run.measure(self.reference.mean)
+        run = self._measure(Run(strategy, film, spent, nonfinite, budget=budget))
         self._say(f"  {strategy.label}: {run.spp} spp in {run.seconds:.2f} s of {budget:.2f} s, "
                   f"relMSE {run.measures['relmse']:.4g}")
         return run
@@ -126,10 +183,10 @@ class Comparison:
         while (max_spp is None or target <= max_spp):
             settings = RenderSettings(spp=target - spp, seed=self.seed, threads=self.threads,
                                       first_sample=spp)
-            result = render(self.scene, strategy, settings, film=film, estimator=estimator)
+            result = self._render(strategy, settings, film, estimator)
             film, spp = result.film, target
             spent += result.seconds
-            rel = metrics.relmse(film.mean, self.reference.mean)
+            rel = metrics.relmse(film.mean, self.reference.mean, self.reference_variance)
             points.append({"strategy": strategy.name, "heuristic": strategy.recorded_heuristic, "spp": spp,
                            "seconds": spent, "relmse": rel, "efficiency": metrics.efficiency(rel, spent)})
             if budget is not None and spent * 2.0 > budget:  # the next doubling would overshoot
@@ -153,7 +210,9 @@ def fit_convergence(points: list[dict[str, float]], x: str) -> tuple[float, floa
 
 def time_to_reach(points: list[dict[str, float]], target: float) -> tuple[float, bool]:
     """Seconds to reach relMSE <= target: interpolated (log-log) between measured points, else
-    extrapolated along the fitted line. Returns (seconds, extrapolated)."""
+    extrapolated along the fitted line. Returns (seconds, extrapolated). Points whose
+    (corrected) relMSE is not positive are below the reference's resolution and left out."""
+    points = [p for p in points if p["relmse"] > 0.0]
     for before, after in zip(points, points[1:], strict=False):
         if before["relmse"] > target >= after["relmse"]:
             t = np.interp(np.log(target), [np.log(after["relmse"]), np.log(before["relmse"])],

@@ -8,6 +8,14 @@ Images are ``(..., 3)`` float arrays of pixel means; the reference R is a high-s
   (the film's per-sample variance / spp): the error expected without a reference
 - ``efficiency`` = 1 / (relmse x seconds): higher is better at equal time
 
+The reference has noise of its own, and it adds to every measured error: for an image I and a
+reference R rendered independently, E[(I - R)^2] = E[(I - mu)^2] + Var(R) per pixel (mu the true
+value, I unbiased). ``mse`` and ``relmse`` therefore take the variance of each reference pixel
+value (its per-sample variance / its count, which the reference EXR holds) and subtract it,
+giving unbiased estimates of the image's own error; ``reference_relmse`` is the share removed.
+A corrected value can come out at or below 0 when the image's error is below what the
+reference can resolve: it is reported as measured, and its efficiency is then undefined.
+
 Significance levels and z-tests are ``tracer.study.statistics``.
 """
 
@@ -20,9 +28,13 @@ from ..film import Film
 RELMSE_EPSILON = 0.01
 
 
-def mse(image: np.ndarray, reference: np.ndarray) -> float:
-    """Mean over pixels and channels of (I - R)^2; ``image`` and ``reference`` of one shape."""
-    return float(np.mean((image - reference) ** 2))
+def mse(image: np.ndarray, reference: np.ndarray, reference_variance: np.ndarray | None = None) -> float:
+    """Mean over pixels and channels of (I - R)^2 - Var(R); ``image``, ``reference`` and
+    ``reference_variance`` (variance of each reference pixel value; None: 0) of one shape."""
+    error = (image - reference) ** 2
+    if reference_variance is not None:
+        error = error - reference_variance
+    return float(np.mean(error))
 
 
 def relative_squared_error(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -30,9 +42,19 @@ def relative_squared_error(image: np.ndarray, reference: np.ndarray) -> np.ndarr
     return (image - reference) ** 2 / (reference**2 + RELMSE_EPSILON)
 
 
-def relmse(image: np.ndarray, reference: np.ndarray) -> float:
-    """Mean over pixels and channels of :func:`relative_squared_error`."""
-    return float(np.mean(relative_squared_error(image, reference)))
+def relmse(image: np.ndarray, reference: np.ndarray, reference_variance: np.ndarray | None = None) -> float:
+    """Mean over pixels and channels of :func:`relative_squared_error`, less
+    Var(R) / (R^2 + 0.01) when ``reference_variance`` is given (see the module docstring)."""
+    error = relative_squared_error(image, reference)
+    if reference_variance is not None:
+        error = error - reference_variance / (reference**2 + RELMSE_EPSILON)
+    return float(np.mean(error))
+
+
+def reference_relmse(reference: np.ndarray, reference_variance: np.ndarray) -> float:
+    """The reference's own noise on the relMSE scale: mean of Var(R) / (R^2 + 0.01), what
+    :func:`relmse` subtracts."""
+    return float(np.mean(reference_variance / (reference**2 + RELMSE_EPSILON)))
 
 
 def variance(film: Film) -> float:
@@ -41,9 +63,11 @@ def variance(film: Film) -> float:
 
 
 def efficiency(relmse_value: float, seconds: float) -> float:
-    """1 / (relMSE x seconds); infinite for an exact image."""
+    """1 / (relMSE x seconds); NaN (undefined) when relMSE x seconds is not positive: an exact
+    image, or an error below what the reference resolves. Reports show NaN as "n/a" and
+    write it to JSON as null."""
     denom = relmse_value * seconds
-    return float("inf") if denom <= 0.0 else 1.0 / denom
+    return float("nan") if not denom > 0.0 else 1.0 / denom
 
 
 def box_blur(image: np.ndarray, radius: int) -> np.ndarray:

@@ -175,11 +175,13 @@ def grid_image(runs: list[Run], reference: Film, windows: list[tuple[int, int, i
 
 
 def convergence_chart(sweep: list[dict[str, Any]], target: float, path: Path) -> None:
-    """relMSE against seconds and against spp, log-log, with fitted slopes in the legend."""
+    """relMSE against seconds and against spp, log-log, with fitted slopes in the legend.
+    Points whose corrected relMSE is not positive (below the reference's noise, or an exactly
+    black image) cannot sit on a log axis and are left out."""
     plt = _pyplot()
     fig, (ax_t, ax_s) = plt.subplots(1, 2, figsize=(11, 4.3))
     for name in dict.fromkeys(p["strategy"] for p in sweep):
-        pts = [p for p in sweep if p["strategy"] == name]
+        pts = [p for p in sweep if p["strategy"] == name and p["relmse"] > 0.0]
         color = COLORS.get(name)
         slope_t, _ = fit_convergence(pts, "seconds")
         slope_s, _ = fit_convergence(pts, "spp")
@@ -189,6 +191,8 @@ def convergence_chart(sweep: list[dict[str, Any]], target: float, path: Path) ->
                     label=f"{name} (slope {slope_s:.2f})", ms=3)
     for ax, xlabel in ((ax_t, "seconds"), (ax_s, "samples per pixel")):
         ax.axhline(target, color="k", lw=0.7, ls="--")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
         ax.set_xlabel(xlabel)
         ax.set_ylabel("relMSE")
         ax.grid(True, which="both", lw=0.3, alpha=0.5)
@@ -219,15 +223,38 @@ def allocation_chart(rows: list[dict[str, Any]], path: Path) -> None:
 # Tables and the page
 
 
+def json_safe(value: Any) -> Any:
+    """``value`` with every non-finite float (an undefined efficiency, a time to target never
+    reached) replaced by None, so that it is valid JSON (null), not NaN or Infinity."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def number(value: Any, spec: str = ".4g") -> str:
+    """A measure for a table: formatted, or ``n/a`` when it is missing or not finite."""
+    if value is None or isinstance(value, float) and not np.isfinite(value):
+        return "n/a"
+    return format(value, spec)
+
+
 def write_tables(out: Path, document: dict[str, Any]) -> None:
-    """metrics.json (the whole document) and metrics.csv (the results table)."""
-    write_text(out / "metrics.json", json.dumps(document, indent=2, allow_nan=True) + "\n")
+    """metrics.json (the whole document, strict JSON: undefined numbers are null) and
+    metrics.csv (the results table; undefined numbers are empty cells)."""
+    safe = json_safe(document)
+    write_text(out / "metrics.json", json.dumps(safe, indent=2, allow_nan=False) + "\n")
     columns = ["strategy", "heuristic", "light_samples", "bsdf_samples", "spp", "seconds", "budget",
-               "mse", "relmse", "variance", "efficiency", "flip"]
+               "mse", "relmse", "variance", "efficiency", "flip", "mse_uncorrected", "relmse_uncorrected"]
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=columns, extrasaction="ignore")
     writer.writeheader()
-    writer.writerows(document["results"])
+    writer.writerows(safe["results"])
     write_text(out / "metrics.csv", table.getvalue())
 
 
@@ -239,8 +266,8 @@ def write_index(out: Path, document: dict[str, Any], images: dict[str, list[str]
         budget = f" of {r['budget']:.2f}" if "budget" in r else ""
         rows.append(
             f"<tr><td>{esc(r['name'])}</td><td>{r['spp']}</td><td>{r['seconds']:.2f}{budget}</td>"
-            f"<td>{r['mse']:.4g}</td><td>{r['relmse']:.4g}</td><td>{r['variance']:.4g}</td>"
-            f"<td>{r['efficiency']:.4g}</td><td>{r.get('flip', float('nan')):.3f}</td></tr>")
+            f"<td>{number(r['mse'])}</td><td>{number(r['relmse'])}</td><td>{number(r['variance'])}</td>"
+            f"<td>{number(r['efficiency'])}</td><td>{number(r.get('flip'), '.3f')}</td></tr>")
     sections = []
     for title, files in images.items():
         figures = "".join(f'<a href="{esc(f)}"><img src="{esc(f)}" alt="{esc(f)}"></a>' for f in files)
@@ -259,7 +286,10 @@ td:first-child, th:first-child {{ text-align: left; }}
 <h1>{esc(document['scene'])}: sampling strategies compared</h1>
 <p>Mode: <b>{esc(mode['kind'])}</b> ({esc(mode['description'])}). Reference:
 <code>{esc(document['reference'])}</code> ({document['reference_spp']} spp MIS).
-relMSE = mean (I&minus;R)&sup2;/(R&sup2;+0.01); efficiency = 1/(relMSE &times; seconds).
+relMSE = mean (I&minus;R)&sup2;/(R&sup2;+0.01) and MSE = mean (I&minus;R)&sup2;, each less the
+reference's own variance (its noise, relMSE {number(document['reference_noise']['relmse'])}, which
+adds to every measured error; <code>*_uncorrected</code> in the data are as measured; the error maps
+are uncorrected); efficiency = 1/(relMSE &times; seconds), n/a where relMSE is not positive.
 Data: <a href="metrics.json">metrics.json</a>, <a href="metrics.csv">metrics.csv</a>.</p>
 <table><tr><th>strategy</th><th>spp</th><th>seconds</th><th>MSE</th><th>relMSE</th>
 <th>variance</th><th>efficiency</th><th>FLIP</th></tr>
@@ -339,9 +369,15 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
     if ratio_files:
         images["Per-pixel efficiency ratio (where each strategy wins)"] = ratio_files
 
-    document: dict[str, Any] = {"scene": scene_name, "reference": reference_path,
-                                "reference_spp": reference.spp, "mode": mode, "results": results,
-                                "sweep": sweep, "efficiency_ratio": wins}
+    reference_variance = reference.variance_of_mean()
+    document: dict[str, Any] = {
+        "scene": scene_name, "reference": reference_path, "reference_spp": reference.spp,
+        "reference_noise": {
+            "relmse": metrics.reference_relmse(reference.mean, reference_variance),
+            "mse": float(np.mean(reference_variance)),
+            "correction": "mse and relmse have the reference's per-pixel variance subtracted "
+                          "(unbiased for the image's own error); *_uncorrected are as measured"},
+        "mode": mode, "results": results, "sweep": sweep, "efficiency_ratio": wins}
     if sweep:
         convergence_chart(sweep, target, out / "convergence.png")
         document["time_to_target"] = time_to_target_rows(sweep, target)
