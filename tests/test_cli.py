@@ -181,6 +181,25 @@ def test_bad_option_and_process_exit_status(tmp_path):
         assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.parametrize("option, value, words", [
+    ("--spp", str(2**53 + 1), "1 .. 9007199254740992"),
+    ("--spp", "1e9", "expected a whole number"),
+    ("--seed", str(2**64), "0 .. 18446744073709551615"),
+    ("--threads", "100000", "1 .. 1024"),
+    ("--light-samples", str(10**9), "0 .. 1000000"),
+    ("--width", str(2**40), "1 .. 2147483647"),
+])
+def test_absurd_numbers_are_refused_in_one_line(option, value, words, capsys):
+    """Numbers past what they can mean (sample indices past 2^53, seeds past 64 bits, a million
+    threads each keeping two batches in flight) are refused by the parser: exit 2, one line
+    naming the option and its range, not argparse's usage block (nine lines before)."""
+    with pytest.raises(SystemExit) as info:
+        main(["render", option, value])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and len(err.strip().splitlines()) == 1, err
+    assert f"argument {option}: " in err and words in err, err
+
+
 def test_render_writes_exr_contract_and_png(tmp_path, capsys):
     """A CLI render writes the six channels, the header attributes and a PNG of the same stem."""
     scene = tmp_path / "s.toml"

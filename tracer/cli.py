@@ -19,23 +19,30 @@ EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 
 
-def _int_at_least(lo: int):
-    """An argparse type: a whole number >= lo, with a message that says what was wrong."""
+def _int_in(lo: int, hi: int):
+    """An argparse type: a whole number in lo .. hi, with a message that says what was wrong."""
 
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
-        if value < lo:
-            raise argparse.ArgumentTypeError(f"expected a number >= {lo}, got {value}")
+            raise argparse.ArgumentTypeError(f"expected a whole number, got '{text[:40]}'") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"expected a whole number in {lo} .. {hi}, got {text[:40]}")
         return value
 
     return parse
 
 
-_positive_int = _int_at_least(1)
-_count = _int_at_least(0)
+# Bounds that mean something: sample indices and counts stay exact below 2^53
+# (tracer.record.MAX_SAMPLE_INDEX), seeds are 64-bit, each thread keeps two batches in flight,
+# and a camera sample's shading rays are sized to fit in memory.
+MAX_SPP = 2**53
+_spp = _int_in(1, MAX_SPP)
+_seed = _int_in(0, 2**64 - 1)
+_threads = _int_in(1, 1024)
+_samples_per_camera_sample = _int_in(0, 1_000_000)
+_side = _int_in(1, 2**31 - 1)
 
 
 def _positive_float(text: str) -> float:
@@ -80,7 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("scene", nargs="?", help="scene file (default: the veach_mis scene shipped with tracer)")
     r.add_argument("-o", "--output", help="output EXR path (default: SCENE_STRATEGY.exr here); "
                    "the PNG preview goes beside it")
-    r.add_argument("--spp", type=_positive_int, help="samples per pixel (default: the scene's, else 64)")
+    r.add_argument("--spp", type=_spp, help="samples per pixel (default: the scene's, else 64)")
     r.add_argument("--strategy", choices=STRATEGIES,
                    help="sampling strategy (default: the scene's, else mis)")
     _add_strategy_options(r)
@@ -92,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "to an existing one with --resume.")
     ref.add_argument("scene", help="scene file")
     ref.add_argument("-o", "--output", help="reference EXR (default: SCENE_reference.exr here)")
-    ref.add_argument("--spp", type=_positive_int, default=1024,
+    ref.add_argument("--spp", type=_spp, default=1024,
                      help="samples per pixel to add (default 1024)")
     ref.add_argument("--resume", action="store_true",
                      help="add --spp samples to the existing OUTPUT (fresh random numbers; spp adds up)")
@@ -110,7 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--strategies", default=",".join(STRATEGIES),
                    help="comma-separated strategies (default: all five)")
     budget = c.add_mutually_exclusive_group(required=True)
-    budget.add_argument("--spp", type=_positive_int, help="equal samples: every strategy renders N spp")
+    budget.add_argument("--spp", type=_spp, help="equal samples: every strategy renders N spp")
     budget.add_argument("--time", type=_positive_float, metavar="SECONDS",
                         help="equal time: every strategy renders for SECONDS")
     c.add_argument("--out", default="compare", help="output folder (default ./compare)")
@@ -122,8 +129,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--crop", action="append", type=_crop, metavar="X,Y,W,H",
                    help="inset region in pixels (repeatable; default: chosen where strategies differ most)")
     _add_strategy_options(c)
-    c.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
-    c.add_argument("--threads", type=_positive_int, default=os.cpu_count() or 1, help="worker threads")
+    c.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
+    c.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
     c.add_argument("--exposure", type=_exposure, default=0.0, help="PNG exposure in stops (default 0)")
     c.add_argument("--quiet", action="store_true", help="no progress lines")
     c.set_defaults(run=cmd_compare)
@@ -137,9 +144,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="baseline JSON (default renders/noise_baseline.json)")
     ch.add_argument("--update", action="store_true", help="rewrite the baseline from fresh measurements")
     ch.add_argument("--out", default="check_failures", help="where the maps of failing entries go")
-    ch.add_argument("--seed-offset", type=_count, default=0,
+    ch.add_argument("--seed-offset", type=_seed, default=0,
                     help="add this to every seed (other random numbers, same statistics)")
-    ch.add_argument("--threads", type=_positive_int, default=os.cpu_count() or 1, help="worker threads")
+    ch.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
     ch.set_defaults(run=cmd_check)
 
     pr = sub.add_parser("primer", help="Monte Carlo primer: five exercises, each a table and a figure",
@@ -149,7 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "write one PNG figure per exercise.")
     pr.add_argument("--out", metavar="DIR",
                     help="folder for the five PNG figures (created if missing; default: tables only)")
-    pr.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
+    pr.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
     pr.set_defaults(run=cmd_primer)
 
     st = sub.add_parser(
@@ -160,11 +167,11 @@ def build_parser() -> argparse.ArgumentParser:
         "sample counts) and check what must hold; exit 1 if anything does not.",
     )
     st.add_argument("--out", default="stability", help="folder for stability.json and stability.png")
-    st.add_argument("--spp", type=_positive_int, default=64, help="samples per pixel per strategy")
-    st.add_argument("--reference-spp", type=_positive_int, default=1024,
+    st.add_argument("--spp", type=_spp, default=64, help="samples per pixel per strategy")
+    st.add_argument("--reference-spp", type=_spp, default=1024,
                     help="spp of each case's MIS reference (default 1024)")
-    st.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
-    st.add_argument("--threads", type=_positive_int, default=os.cpu_count() or 1, help="worker threads")
+    st.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
+    st.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
     st.set_defaults(run=cmd_stability)
 
     m = sub.add_parser("merge", help="merge two renders of the same scene and strategy exactly",
@@ -183,9 +190,9 @@ def _add_strategy_options(p: argparse.ArgumentParser) -> None:
     from .strategy import HEURISTICS, LIGHT_SELECTIONS
 
     p.add_argument("--heuristic", choices=HEURISTICS, default="power", help="MIS heuristic (default power)")
-    p.add_argument("--light-samples", type=_count, default=1, metavar="N",
+    p.add_argument("--light-samples", type=_samples_per_camera_sample, default=1, metavar="N",
                    help="light samples per camera sample (light, mis; default 1)")
-    p.add_argument("--bsdf-samples", type=_count, default=1, metavar="M",
+    p.add_argument("--bsdf-samples", type=_samples_per_camera_sample, default=1, metavar="M",
                    help="direction samples per camera sample (uniform, cosine, bsdf, mis; default 1)")
     p.add_argument("--one-sample", action="store_true",
                    help="one-sample MIS: each camera sample picks light or BSDF with probability N:M")
@@ -194,11 +201,11 @@ def _add_strategy_options(p: argparse.ArgumentParser) -> None:
 
 
 def _add_render_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seed", type=_count, default=0, help="random seed (default 0)")
-    p.add_argument("--threads", type=_positive_int, default=os.cpu_count() or 1,
+    p.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
+    p.add_argument("--threads", type=_threads, default=os.cpu_count() or 1,
                    help="worker threads (default: all cores); the image does not depend on it")
-    p.add_argument("--width", type=_positive_int, help="override the camera's width in pixels")
-    p.add_argument("--height", type=_positive_int, help="override the camera's height in pixels")
+    p.add_argument("--width", type=_side, help="override the camera's width in pixels")
+    p.add_argument("--height", type=_side, help="override the camera's height in pixels")
     p.add_argument("--exposure", type=_exposure, default=0.0,
                    help="PNG preview exposure in stops (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")

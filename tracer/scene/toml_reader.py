@@ -20,6 +20,7 @@ import numpy as np
 from .. import materials
 from ..camera import Camera
 from ..errors import InputError
+from ..record import MAX_SAMPLE_INDEX
 from ..strategy import STRATEGIES
 from .model import Scene, Shape
 
@@ -249,7 +250,8 @@ def _short(value: Any) -> str:
 def _read_render(r: _Reader) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if r.has("spp"):
-        out["spp"] = r.number("spp", lo=1, integer=True)
+        # Sample indices stop at 2^53, where counts stay exact (tracer.record.MAX_SAMPLE_INDEX).
+        out["spp"] = r.number("spp", lo=1, hi=MAX_SAMPLE_INDEX, integer=True)
     if r.has("strategy"):
         out["strategy"] = r.string("strategy", STRATEGIES)
     r.done()
