@@ -195,3 +195,28 @@ def test_a_reference_of_another_scene_is_refused(baseline_copy, capsys):
     assert main(["check", "--baseline", str(baseline_copy)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "veach_mis.exr: tracer:scene_digest" in err[0], err
+
+
+def test_an_interrupted_check_neither_judges_nor_writes(baseline_copy, monkeypatch, capsys):
+    """Ctrl-C during `check --update` (injected: the second render reports it was interrupted,
+    as render() does after a signal): exit 130 and the baseline file unchanged. Before, the cut
+    render was measured as if it had its full spp and written into the baseline, exit 0."""
+    from tracer import render_loop
+
+    doc = json.loads(baseline_copy.read_text())
+    doc["entries"] = [e for e in doc["entries"] if e["scene"] == "point_light"][:1]
+    baseline_copy.write_text(json.dumps(doc))
+    before = baseline_copy.read_bytes()
+    real_render = render_loop.render
+    calls = []
+
+    def interrupted_on_second_call(*args, **kwargs):
+        result = real_render(*args, **kwargs)
+        calls.append(1)
+        result.interrupted = result.interrupted or len(calls) == 2
+        return result
+
+    monkeypatch.setattr(render_loop, "render", interrupted_on_second_call)
+    assert main(["check", "--baseline", str(baseline_copy), "--update"]) == 130
+    assert baseline_copy.read_bytes() == before and len(calls) == 2
+    assert "interrupted" in capsys.readouterr().err

@@ -298,6 +298,8 @@ def test_interrupt_writes_what_was_rendered(tmp_path, signum):
     assert "interrupted" in err and "Traceback" not in err
     film = read_exr(out)
     assert 0 < film.spp < 10_000_000
+    # The record lists the indices drawn (each pixel holds a prefix), not the spp asked for.
+    assert film.record.samples == ((0, 0, int(film.count.max())),)
     # The summary states the file's counts (it once gave an average that disagreed with them).
     assert f"every pixel holds {film.spp} spp or more, up to {int(film.count.max())}" in err, err
     assert film.record.strategy == "mis" and film.record.seed == 0

@@ -10,9 +10,10 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
+from tracer import render_loop
 from tracer.cli import main
 from tracer.film import Film, merge_renders
-from tracer.imagefiles import read_exr
+from tracer.imagefiles import read_exr, write_exr
 from tracer.render_loop import RenderResult, RenderSettings, render
 from tracer.scene import load_scene
 from tracer.strategy import STRATEGIES, Strategy
@@ -133,7 +134,7 @@ def test_equal_time_spends_the_budget(monkeypatch):
         film.add_block(0, np.ones((4, settings.spp, 3)))
         return RenderResult(film, 0.1 * settings.spp, 4 * settings.spp, 0, False)
 
-    monkeypatch.setattr(compare_mod, "render", fake_render)
+    monkeypatch.setattr(render_loop, "render", fake_render)
     reference = Film(2, 2)
     reference.add_block(0, np.ones((4, 1, 3)))
     scene = load_scene(SCENES / "cornell.toml", 2, 2)
@@ -179,7 +180,8 @@ def test_compare_writes_every_file_and_true_numbers(tmp_path):
         for suffix in (".exr", ".png", "_relerr.png", "_flip.png"):
             assert (out / f"{name}{suffix}").is_file(), name + suffix
         record = read_exr(out / f"{name}.exr").record
-        assert (record.strategy, record.seed, record.first_sample, record.next_sample) == (name, 0, 0, 4)
+        # Seed 1: the reference holds seed 0's samples, which the comparison must not reuse.
+        assert (record.strategy, record.seed, record.first_sample, record.next_sample) == (name, 1, 0, 4)
         assert record.heuristic == ("power" if name == "mis" else "none") and record.seconds > 0
         assert record.sampler and record.scene and record.version
     for file in (
@@ -244,7 +246,7 @@ def test_compare_rejects_bad_input(tmp_path, capsys):
     assert "none.exr: no such file" in capsys.readouterr().err
     ref = tmp_path / "r.exr"
     assert (
-        main(["reference", scene, "-o", str(ref), "--width", "8", "--height", "8", "--spp", "1", "--quiet"])
+        main(["reference", scene, "-o", str(ref), "--width", "8", "--height", "8", "--spp", "2", "--quiet"])
         == 0
     )
     assert main(["compare", scene, "--reference", str(ref), "--spp", "1", "--strategies", "mis,fast"]) == 2
@@ -349,7 +351,7 @@ def test_an_interrupted_comparison_writes_no_results(tmp_path, monkeypatch, caps
     assert main(["reference", scene, "-o", str(ref), "--width", "8", "--height", "8", "--spp", "2",
                  "--quiet"]) == 0
     calls = []
-    real_render = compare_mod.render
+    real_render = render_loop.render
 
     def render_interrupted_on_third_call(*args, **kwargs):
         result = real_render(*args, **kwargs)
@@ -358,9 +360,63 @@ def test_an_interrupted_comparison_writes_no_results(tmp_path, monkeypatch, caps
             result.interrupted = True
         return result
 
-    monkeypatch.setattr(compare_mod, "render", render_interrupted_on_third_call)
+    monkeypatch.setattr(render_loop, "render", render_interrupted_on_third_call)
     capsys.readouterr()
     assert main(["compare", scene, "--reference", str(ref), "--time", "0.5", "--out", str(out),
                  "--quiet"]) == 130
     assert "interrupted: the comparison is incomplete, nothing written" in capsys.readouterr().err
     assert not out.exists() and len(calls) == 3
+
+
+def test_compare_draws_samples_independent_of_the_reference(tmp_path, capsys):
+    """The reference holds seed 0's samples 0-63; compare's renders must not reuse them (its mis
+    run would be the reference's first N samples exactly, and the noise correction would then
+    favour it by twice the reference's variance). By default compare picks seed 1; --seed 0 is
+    refused with one line naming the reference and the seed."""
+    scene = str(SCENES / "cornell.toml")
+    ref, out = tmp_path / "ref.exr", tmp_path / "cmp"
+    assert main(["reference", scene, "-o", str(ref), "--width", "8", "--height", "8", "--spp", "64",
+                 "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["compare", scene, "--reference", str(ref), "--spp", "4", "--strategies", "mis",
+                 "--out", str(out), "--quiet", "--seed", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "ref.exr: --seed 0: the reference holds samples of seed 0" in err and len(err.splitlines()) == 1
+    assert main(["compare", scene, "--reference", str(ref), "--spp", "4", "--strategies", "mis",
+                 "--out", str(out), "--quiet"]) == 0
+    assert read_exr(out / "mis.exr").record.samples == ((1, 0, 4),)
+    reference = read_exr(ref)
+    assert not np.array_equal(read_exr(out / "mis.exr").mean, reference.mean)
+
+
+def test_compare_refuses_references_it_cannot_measure_with(tmp_path, capsys):
+    """A reference with pixels of 0 samples (a first pass cut short) or only 1 (no variance) is
+    refused: it used to be accepted (reference_spp 0, relMSE 82 where a good reference gives
+    0.004). A 3x2 reference for a square camera is another frame (the aspect check allowed one
+    pixel of slack per pixel of size: 3x2 passed). An output folder that cannot be made is
+    refused before any rendering. Each: exit 2, one line."""
+    scene = str(SCENES / "cornell.toml")
+    good = tmp_path / "good.exr"
+    assert main(["reference", scene, "-o", str(good), "--width", "8", "--height", "8", "--spp", "2",
+                 "--quiet"]) == 0
+    film = read_exr(good)
+    holes = Film(8, 8)
+    holes.add_block(0, np.ones((32, 2, 3)))  # half the pixels rendered
+    holes.record = film.record
+    write_exr(tmp_path / "holes.exr", holes)
+    assert main(["reference", scene, "-o", str(tmp_path / "one.exr"), "--width", "8", "--height", "8",
+                 "--spp", "1", "--quiet"]) == 0
+    assert main(["reference", scene, "-o", str(tmp_path / "small.exr"), "--width", "3", "--height", "2",
+                 "--spp", "2", "--quiet"]) == 0
+    capsys.readouterr()
+    for name, words in (("holes", "the reference has pixels with 0 sample(s)"),
+                        ("one", "the reference has pixels with 1 sample(s)"),
+                        ("small", "the reference is 3x2, the scene's camera 256x256")):
+        assert main(["compare", scene, "--reference", str(tmp_path / f"{name}.exr"), "--spp", "1",
+                     "--out", str(tmp_path / "cmp"), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert f"{name}.exr: {words}" in err and len(err.strip().splitlines()) == 1, err
+    assert main(["compare", scene, "--reference", str(good), "--spp", "1", "--out", "/proc/tracer/x",
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "/proc/tracer/x: cannot write into this folder" in err and len(err.strip().splitlines()) == 1, err

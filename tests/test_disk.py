@@ -118,16 +118,18 @@ def test_injected_write_failure_keeps_old_files(target, tmp_path, monkeypatch, c
 
 
 def test_stale_temporaries_are_removed_by_the_next_write(tmp_path):
-    """A temporary left by a killed writer (mkstemp's shape beside the target, older than an
-    hour) is removed by the next write to that target; a fresh one (a write under way) and files
-    of other shapes are kept."""
+    """A temporary left by a killed writer (.r.tracer-tmp-XXXXXXXX.exr beside the target, older
+    than an hour) is removed by the next write to that target; a fresh one (a write under way)
+    and a user's own hidden files of the same length (.r.original.exr, which the first version
+    of this cleanup deleted) are kept."""
     target = tmp_path / "r.exr"
-    stale, fresh = tmp_path / ".r.abcd1234.exr", tmp_path / ".r.efgh5678.exr"
-    other = tmp_path / ".r.not-a-temp.exr"
-    for path in (stale, fresh, other):
+    stale, fresh = tmp_path / ".r.tracer-tmp-abcd1234.exr", tmp_path / ".r.tracer-tmp-efgh5678.exr"
+    others = [tmp_path / ".r.original.exr", tmp_path / ".r.20241130.exr", tmp_path / ".r.backup_1.exr"]
+    for path in (stale, fresh, *others):
         path.write_bytes(b"torn")
     old = time.time() - 2 * atomic.STALE_SECONDS
-    os.utime(stale, (old, old))
-    os.utime(other, (old, old))
+    for path in (stale, *others):
+        os.utime(path, (old, old))
     atomic.write_text(target, "x")
-    assert not stale.exists() and fresh.exists() and other.exists() and target.read_text() == "x"
+    assert not stale.exists() and fresh.exists() and all(p.exists() for p in others)
+    assert target.read_text() == "x"

@@ -4,6 +4,7 @@ would mix scenes or count a sample twice."""
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import tomllib
 from pathlib import Path
@@ -11,8 +12,9 @@ from pathlib import Path
 import pytest
 
 from tracer.cli import main
-from tracer.imagefiles import read_exr
-from tracer.record import canonical_ranges, format_ranges, parse_ranges
+from tracer.errors import InputError
+from tracer.imagefiles import read_exr, write_exr
+from tracer.record import RenderRecord, canonical_ranges, check_mergeable, format_ranges, merged, parse_ranges
 from tracer.scene import load_scene
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
@@ -127,3 +129,70 @@ def test_sample_ranges_are_canonical_and_round_trip(ranges, text):
     """Touching ranges of one seed join, the set sorts, and the header text reads back exactly."""
     canonical = canonical_ranges(ranges)
     assert format_ranges(canonical) == text and parse_ranges(text) == canonical
+
+
+def test_a_file_holding_more_samples_than_it_lists_cannot_be_pooled(tmp_path, capsys):
+    """tracer 0.1's merge kept one seed's range: a file of 8 spp saying 'seed 1, samples 0-3'.
+    Read as is, a merge with the seed-2 render it already holds was accepted and counted it
+    twice. Such a file is read with its samples unknown, and pooling it is refused, naming it."""
+    scene = str(SCENES / "cornell.toml")
+    for seed in (1, 2):
+        assert main(["render", scene, "-o", str(tmp_path / f"r{seed}.exr"), "--seed", str(seed), *SMALL]) == 0
+    assert main(["merge", str(tmp_path / "r1.exr"), str(tmp_path / "r2.exr"), "-o", str(tmp_path / "m.exr"),
+                 "--quiet"]) == 0
+    old = read_exr(tmp_path / "m.exr")
+    old.record = dataclasses.replace(old.record, samples=((1, 0, 2),))  # as tracer 0.1 wrote it
+    write_exr(tmp_path / "old.exr", old)
+    assert read_exr(tmp_path / "old.exr").record.samples is None
+    capsys.readouterr()
+    assert main(["merge", str(tmp_path / "old.exr"), str(tmp_path / "r2.exr"), "-o", str(tmp_path / "x.exr"),
+                 "--quiet"]) == 2
+    line = _one_error_line(capsys)
+    assert "old.exr does not say which samples it holds" in line
+
+
+def test_a_pool_keeps_the_scene_digest_it_knows():
+    """Pooling a file without a digest (matched by scene name) with one that has it keeps the
+    digest, so that a later pool with another scene of that name is still refused (the pool
+    used to drop it and then mixed the scenes). A file without any scene is refused."""
+    digest_a, digest_b = "1" * 64, "2" * 64
+    old = RenderRecord(strategy="mis", scene="x/cornell.toml", samples=((1, 0, 4),))
+    new = RenderRecord(strategy="mis", scene="y/cornell.toml", scene_digest=digest_a, samples=((2, 0, 4),))
+    pooled = merged(old, new)
+    assert pooled.scene_digest == digest_a
+    other = RenderRecord(strategy="mis", scene="z/cornell.toml", scene_digest=digest_b, samples=((3, 0, 4),))
+    with pytest.raises(InputError, match="tracer:scene_digest"):
+        check_mergeable(pooled, other)
+    with pytest.raises(InputError, match="does not say which scene"):
+        check_mergeable(RenderRecord(strategy="mis", samples=((1, 0, 4),)), old)
+
+
+def test_an_interrupted_render_records_the_samples_it_drew(monkeypatch):
+    """A render stopped after some batches (injected: Ctrl-C from the batch merge callback
+    once a third of the pixels have their first pass) records seed 0 from 0 to the largest count
+    it drew, not the spp it was asked for, so a resume continues right after."""
+    from tracer import render_loop
+    from tracer.film import Film
+    from tracer.render_loop import RenderSettings, render
+    from tracer.strategy import Strategy
+
+    scene = load_scene(SCENES / "cornell.toml", 16, 16)
+    film = Film(16, 16)
+    real_add = Film.add_block
+    calls = []
+
+    def add_then_interrupt(self, first_pixel, samples):
+        real_add(self, first_pixel, samples)
+        calls.append(first_pixel)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(Film, "add_block", add_then_interrupt)
+    result = render(scene, Strategy("mis"), RenderSettings(spp=1000, threads=1, batch_lanes=64), film=film)
+    monkeypatch.setattr(Film, "add_block", real_add)
+    held = int(film.count.max())
+    assert result.interrupted and 0 < held < 1000 and film.count.min() < held
+    assert film.record.samples == ((0, 0, held),)
+    resumed = render_loop.render(scene, Strategy("mis"), RenderSettings(spp=2, threads=1, first_sample=held),
+                                 film=film)
+    assert resumed.film.record.samples == ((0, 0, held + 2),)

@@ -23,8 +23,10 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[str], None]) -> 
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
         raise InputError("output folder does not exist", str(folder))
+    if target.is_dir():
+        raise InputError("is a folder, not a file that can be written", str(target))
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=folder)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.{TEMPORARY_TAG}", suffix=target.suffix, dir=folder)
     except OSError as exc:
         raise InputError(f"cannot write: {exc.strerror or exc}", str(target)) from None
     os.close(fd)
@@ -32,15 +34,15 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[str], None]) -> 
         try:
             write(tmp)
             _sync(tmp)  # the bytes reach the disk before the name does: no empty file after a crash
+            # mkstemp makes the file private (0600); give it the permissions a plain open() would.
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
+            os.replace(tmp, target)
         except (OSError, InputError) as exc:
             # Name the file the user asked for, not the temporary one (removed below); a full
-            # disk or a failing device ends here, from OpenImageIO or from open()/write().
+            # disk, a failing device or a refused rename ends here.
             raise InputError(_write_failure(exc, tmp, folder), str(target)) from None
-        # mkstemp makes the file private (0600); give it the permissions a plain open() would.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, target)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
@@ -67,14 +69,17 @@ def _write_failure(exc: BaseException, tmp: str, folder: Path) -> str:
 
 
 # A temporary file left by a process that was killed (SIGKILL cannot be caught) while writing:
-# mkstemp's name for it (prefix, eight characters, suffix), untouched for longer than any write
-# takes. Only files of exactly that shape next to the target are removed.
+# ``.STEM.tracer-tmp-XXXXXXXX.SUFFIX`` (mkstemp's eight characters), untouched for longer than
+# any write takes. The tag keeps a user's own hidden files (``.ref.backup_1.exr``) out of it.
+TEMPORARY_TAG = "tracer-tmp-"
 STALE_SECONDS = 3600.0
 
 
 def _remove_stale_temporaries(target: Path) -> None:
-    """Delete ``.STEM.XXXXXXXX.SUFFIX`` files beside ``target`` older than STALE_SECONDS."""
-    pattern = re.compile(re.escape(f".{target.stem}.") + r"[a-z0-9_]{8}" + re.escape(target.suffix))
+    """Delete ``.STEM.tracer-tmp-XXXXXXXX.SUFFIX`` files beside ``target`` older than
+    STALE_SECONDS."""
+    pattern = re.compile(re.escape(f".{target.stem}.{TEMPORARY_TAG}") + r"[a-z0-9_]{8}"
+                         + re.escape(target.suffix))
     folder = target.parent if str(target.parent) else Path(".")
     try:
         candidates = [p for p in folder.iterdir() if pattern.fullmatch(p.name)]

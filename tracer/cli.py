@@ -129,7 +129,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--crop", action="append", type=_crop, metavar="X,Y,W,H",
                    help="inset region in pixels (repeatable; default: chosen where strategies differ most)")
     _add_strategy_options(c)
-    c.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
+    c.add_argument("--seed", type=_seed, default=None,
+                   help="random seed (default: the smallest the reference holds no samples of)")
     c.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
     c.add_argument("--exposure", type=_exposure, default=0.0, help="PNG exposure in stops (default 0)")
     c.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -269,6 +270,38 @@ def _exr_path(text: str) -> Path:
     return output
 
 
+def _output_folder(text: str) -> Path:
+    """An output folder, checked before any work starts: not an existing file, and a file can be
+    created in it. Folders that do not exist yet are created for the probe and removed again
+    (the command creates them when it writes), so a refused or interrupted run leaves none."""
+    import tempfile
+
+    out = Path(text)
+    if out.exists() and not out.is_dir():
+        raise InputError("exists and is not a folder", str(out))
+    missing = []
+    parent = out
+    while not parent.exists() and parent != parent.parent:
+        missing.append(parent)
+        parent = parent.parent
+    created = []
+    try:
+        for folder in reversed(missing):
+            folder.mkdir()
+            created.append(folder)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise InputError(f"cannot write into this folder: {exc.strerror or exc}", str(out)) from None
+    finally:
+        for folder in reversed(created):
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
+    return out
+
+
 def _exposure(text: str) -> float:
     """An argparse type: exposure in stops, finite and within +-100 (2^100 already saturates
     every pixel; beyond that the scale overflows)."""
@@ -390,7 +423,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from .imagefiles import read_exr
     from .strategy import STRATEGIES, Strategy
     from .study import report
-    from .study.compare import ALLOCATIONS, Comparison, scene_for_reference
+    from .study.compare import ALLOCATIONS, Comparison, independent_seed, scene_for_reference
 
     names = [n.strip() for n in args.strategies.split(",") if n.strip()]
     unknown = [n for n in names if n not in STRATEGIES]
@@ -403,10 +436,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
         if x + w > reference.width or y + h > reference.height:
             raise InputError(f"--crop {x},{y},{w},{h} leaves the {reference.width}x{reference.height} image",
                              "command line")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError("exists and is not a folder", str(out))
-    comparison = Comparison(scene, reference, args.seed, args.threads, progress=not args.quiet)
+    out = _output_folder(args.out)
+    seed = independent_seed(reference, args.seed, args.reference)
+    comparison = Comparison(scene, reference, seed, args.threads, progress=not args.quiet)
 
     def run(strategy):
         if args.time:
@@ -470,8 +502,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     from .study.check import DEFAULT_BASELINE, format_table, run_check
 
     baseline = Path(args.baseline) if args.baseline else DEFAULT_BASELINE
-    result = run_check(baseline, update=args.update, out=Path(args.out), seed_offset=args.seed_offset,
-                       threads=args.threads)
+    result = run_check(baseline, update=args.update, out=_output_folder(args.out),
+                       seed_offset=args.seed_offset, threads=args.threads)
     if args.update:
         print(f"baseline written: {baseline} ({len(result.measurements)} entries)", file=sys.stderr)
         return 0
@@ -487,15 +519,13 @@ def cmd_check(args: argparse.Namespace) -> int:
 def cmd_primer(args: argparse.Namespace) -> int:
     from .study.primer import main as primer_main
 
-    return primer_main(args.out, args.seed)
+    return primer_main(_output_folder(args.out) if args.out else None, args.seed)
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
     from .study.stability import Cell, expectations, format_table, run_suite
 
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError("exists and is not a folder", str(out))
+    out = _output_folder(args.out)
     doc = run_suite(out, spp=args.spp, seed=args.seed, threads=args.threads, reference_spp=args.reference_spp)
     print(format_table([Cell(**c) for c in doc["cells"]]))
     print("\nVeach's bound for balance MIS (variances summed over 144 shading points):")

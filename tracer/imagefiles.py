@@ -109,6 +109,11 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
         record = RenderRecord.from_attributes(attributes, int(count.max()) if len(count) else 0)
     except InputError as exc:
         raise InputError(str(exc), path) from None
+    listed = sum(n - f for _, f, n in record.samples or ())
+    if record.samples is not None and len(count) and int(count.max()) > listed:
+        # More samples in a pixel than the ranges list (a merge by tracer 0.1 kept one seed): what
+        # the file holds is unknown, so it may be read and compared with but not pooled.
+        record.samples = None
     m2 = var * np.maximum(count - 1, 0)[:, None]
     return Film(spec.width, spec.height, count, mean, m2, record)
 

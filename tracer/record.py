@@ -43,10 +43,10 @@ _DIGEST = re.compile(r"[0-9a-f]{64}")
 
 
 def canonical_ranges(ranges) -> tuple[SampleRange, ...]:
-    """Sorted by (seed, first), ranges of one seed that touch joined into one. Raises
-    ValueError if two ranges of one seed overlap (they would hold the same samples)."""
+    """Sorted by (seed, first), empty ranges dropped, ranges of one seed that touch joined into
+    one. Raises ValueError if two ranges of one seed overlap (they would hold the same samples)."""
     out: list[list[int]] = []
-    for seed, first, nxt in sorted((int(a), int(b), int(c)) for a, b, c in ranges):
+    for seed, first, nxt in sorted((int(a), int(b), int(c)) for a, b, c in ranges if int(c) > int(b)):
         if out and out[-1][0] == seed and first < out[-1][2]:
             raise ValueError(f"seed {seed}: sample indices {out[-1][1]}-{out[-1][2] - 1} and "
                              f"{first}-{nxt - 1} overlap")
@@ -225,14 +225,20 @@ def check_mergeable(a: RenderRecord, b: RenderRecord, name_a: str = "the first r
         if a.scene_digest != b.scene_digest:
             raise InputError(f"cannot pool {name_a} and {name_b}: different {PREFIX}scene_digest (scenes "
                              f"{a.scene} and {b.scene} differ in content)")
-    elif a.scene and b.scene and Path(a.scene).name != Path(b.scene).name:
+    else:
         # Files from before the digest existed: the scene file names are all there is.
-        raise InputError(f"cannot pool {name_a} and {name_b}: different {PREFIX}scene "
-                         f"({a.scene} and {b.scene})")
+        for name, record in ((name_a, a), (name_b, b)):
+            if not record.scene:
+                raise InputError(f"cannot pool {name_a} and {name_b}: {name} does not say which scene it "
+                                 f"is of (no {PREFIX}scene_digest or {PREFIX}scene)")
+        if Path(a.scene).name != Path(b.scene).name:
+            raise InputError(f"cannot pool {name_a} and {name_b}: different {PREFIX}scene "
+                             f"({a.scene} and {b.scene})")
     for name, record in ((name_a, a), (name_b, b)):
         if record.samples is None:
             raise InputError(f"cannot pool {name_a} and {name_b}: {name} does not say which samples it "
-                             f"holds (no {PREFIX}samples or {PREFIX}seed)")
+                             f"holds (no {PREFIX}samples or {PREFIX}seed, or fewer listed than its pixels "
+                             "hold, as in merges made by tracer 0.1)")
     try:
         canonical_ranges(a.samples + b.samples)
     except ValueError as exc:
@@ -245,5 +251,6 @@ def merged(a: RenderRecord, b: RenderRecord) -> RenderRecord:
     union of their sample ranges, the seconds summed."""
     return dataclasses.replace(a, samples=canonical_ranges(a.samples + b.samples),
                                seconds=(a.seconds or 0.0) + (b.seconds or 0.0),
-                               # A file without a digest was matched by scene name only.
-                               scene_digest=a.scene_digest if a.scene_digest == b.scene_digest else None)
+                               # A file without a digest was matched by scene name only; the
+                               # digest that is known stays, so that later pools still check it.
+                               scene_digest=a.scene_digest or b.scene_digest)

@@ -167,6 +167,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     earlier = film.record if bool(film.count.any()) else None
     if earlier is not None:
         _check_continues(earlier, scene, runs, settings)
+    count_before = film.count.copy()  # to tell, if interrupted, how many sample indices were drawn
     sampler = samplers.make(settings.sampler, settings.seed)
     bar = None
     nonfinite = 0
@@ -200,7 +201,8 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
             _compile(estimator, film, sampler)
         if arrived:
             raise KeyboardInterrupt
-        if progress and time.perf_counter() - start > 1.0:
+        # Compiling takes ~20 s; loading from the cache up to a few seconds on a loaded machine.
+        if progress and time.perf_counter() - start > 5.0:
             print(f"tracer: compiled the shading kernels in {time.perf_counter() - start:.1f} s "
                   "(once after an install or an edit; later runs load them from the cache)", file=sys.stderr)
         bar = _progress_bar(cam.width * cam.height * settings.spp, progress)
@@ -223,8 +225,21 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     finally:
         if bar is not None:
             bar.close()
-    film.record = _record(scene, runs, settings, seconds, earlier)
+    # Each pixel holds a prefix of its new indices (batches start in plan order and every
+    # started one is merged), so an interrupted render drew first .. first + (most added) - 1.
+    drawn = int((film.count - count_before).max()) if interrupted and len(film.count) else settings.spp
+    film.record = _record(scene, runs, settings, drawn, seconds, earlier)
     return RenderResult(film, seconds, samples, nonfinite, interrupted)
+
+
+def render_complete(scene: Scene, strategy: Strategy, settings: RenderSettings, **options) -> RenderResult:
+    """:func:`render` for callers that can use only a whole render (comparisons, checks,
+    baselines: a render cut short would be measured as if it had its full spp): raises
+    ``KeyboardInterrupt`` if Ctrl-C or SIGTERM stopped it."""
+    result = render(scene, strategy, settings, **options)
+    if result.interrupted:
+        raise KeyboardInterrupt
+    return result
 
 
 def _check_continues(earlier: RenderRecord, scene: Scene, strategy: Strategy,
@@ -237,12 +252,12 @@ def _check_continues(earlier: RenderRecord, scene: Scene, strategy: Strategy,
     check_mergeable(earlier, new, "the film", "the samples to add")
 
 
-def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, seconds: float,
+def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, drawn: int, seconds: float,
             earlier: RenderRecord | None) -> RenderRecord:
-    """The record of a film after a render of ``settings.spp`` samples from
+    """The record of a film after a render that drew ``drawn`` sample indices from
     ``settings.first_sample`` into it: the new range joined to the ``earlier`` record's."""
     record = RenderRecord.of_render(strategy, settings.sampler, settings.seed, settings.first_sample,
-                                    settings.spp, seconds, scene)
+                                    drawn, seconds, scene)
     return merged(record, earlier) if earlier is not None else record
 
 

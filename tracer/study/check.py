@@ -43,7 +43,7 @@ from ..atomic import write_text
 from ..errors import InputError
 from ..film import Film, merge_renders
 from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
-from ..render_loop import RenderSettings, render
+from ..render_loop import RenderSettings, render_complete
 from ..scene import Scene, default_scene_path
 from ..strategy import HEURISTICS, STRATEGIES, Strategy
 from . import metrics, statistics
@@ -265,12 +265,18 @@ def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) ->
             str(ref_path),
         )
     scene = scene_for_reference(scene_path(entry, base), ref_path, reference, f, quiet=True)
+    # Renders that drew the reference's own random numbers would share its noise.
+    reference_seeds = {s for s, _, _ in reference.record.samples or ()}
+    shared = sorted({seed + seed_offset for seed in entry.seeds} & reference_seeds)
+    if shared:
+        raise InputError(f"seed(s) {shared} (with --seed-offset {seed_offset}) are the reference's own: "
+                         "the renders would share its samples", str(ref_path))
     ref_mean, ref_var, ref_sample_var = downsampled_reference(reference, f, exr_is_half(ref_path))
     strategy = entry.strategy_object()
     pooled: Film | None = None
     relmse, variance, seconds = [], [], 0.0
     for seed in entry.seeds:
-        result = render(
+        result = render_complete(
             scene, strategy, RenderSettings(spp=entry.spp, seed=seed + seed_offset, threads=threads)
         )
         relmse.append(metrics.relmse(result.film.mean, ref_mean))

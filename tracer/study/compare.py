@@ -26,7 +26,7 @@ from ..embree import RayCaster
 from ..errors import InputError
 from ..estimators import DirectLighting
 from ..film import Film
-from ..render_loop import RenderSettings, render
+from ..render_loop import RenderSettings, render_complete
 from ..scene import Scene, load_scene
 from ..strategy import Strategy
 from . import metrics
@@ -36,9 +36,15 @@ def scene_for_reference(scene_path: str | Path, reference_path: str | Path, refe
                         downsample: int = 1, quiet: bool = False) -> Scene:
     """The scene, loaded to render at the reference's resolution / ``downsample``, after
     checking that the reference is of it: the same scene digest (when the reference records
-    one; otherwise a note says it cannot be checked) and the same aspect ratio as the scene's
+    one; otherwise a note says it cannot be checked), the same aspect ratio as the scene's
     camera, to within one pixel's rounding (a reference of the same frame at another size is
-    fine, and a note says so). ``InputError`` naming the reference file otherwise."""
+    fine, and a note says so), and at least 2 samples in every pixel (a reference interrupted
+    in its first pass has pixels without any, and one sample gives no variance to correct
+    with). A reference not made with MIS gets a note: it shares the blind spots of its
+    strategy (point lights for bsdf). ``InputError`` naming the reference file otherwise."""
+    if reference.spp < 2:
+        raise InputError(f"the reference has pixels with {reference.spp} sample(s); it needs at least 2 in "
+                         "every pixel (grow it with tracer reference --resume)", str(reference_path))
     scene = load_scene(scene_path)
     digest = reference.record.scene_digest
     if digest is not None and digest != scene.digest:
@@ -47,9 +53,14 @@ def scene_for_reference(scene_path: str | Path, reference_path: str | Path, refe
     if digest is None and not quiet:
         print(f"tracer: note: {reference_path} does not record its scene's digest (made by another tool "
               "or an older tracer): it cannot be checked to be of this scene", file=sys.stderr)
+    if reference.record.strategy not in (None, "mis") and not quiet:
+        print(f"tracer: note: {reference_path} was rendered with {reference.record.strategy}, not mis: it "
+              "misses what that strategy cannot see", file=sys.stderr)
     width, height = scene.camera.width, scene.camera.height
     aspect = width / height
-    if abs(reference.width / reference.height - aspect) > aspect / min(reference.width, reference.height):
+    # The same frame: one side of the reference is the other times the aspect ratio, rounded.
+    if abs(reference.width - reference.height * aspect) > 0.5 and \
+            abs(reference.height - reference.width / aspect) > 0.5:
         raise InputError(f"the reference is {reference.width}x{reference.height}, the scene's camera "
                          f"{width}x{height}: another aspect ratio, so another image", str(reference_path))
     size = (reference.width // downsample, reference.height // downsample)
@@ -58,6 +69,27 @@ def scene_for_reference(scene_path: str | Path, reference_path: str | Path, refe
               f"not the scene's {width}x{height}", file=sys.stderr)
     scene.camera = dataclasses.replace(scene.camera, width=size[0], height=size[1])
     return scene
+
+
+def independent_seed(reference: Film, seed: int | None, reference_path: str | Path) -> int:
+    """A seed whose samples are independent of the reference's: ``seed`` if the reference holds
+    none of it, else InputError; None picks the smallest such seed. A comparison that drew the
+    reference's own random numbers would share its noise (the reference's first N samples
+    *are* an N-spp MIS render), and subtracting the reference's variance would then favour it.
+    A reference that does not say which samples it holds cannot be checked: seed 0 is avoided
+    by default (tracer's default seed) and a note says so."""
+    held = {s for s, _, _ in reference.record.samples or ()}
+    if reference.record.samples is None:
+        print(f"tracer: note: {reference_path} does not say which samples it holds: the comparison's "
+              "renders cannot be checked to be independent of it", file=sys.stderr)
+        held = {0}
+    if seed is not None:
+        if seed in held:
+            raise InputError(f"--seed {seed}: the reference holds samples of seed {seed}, so the "
+                             "comparison would share its random numbers; use another seed or leave "
+                             "--seed out", str(reference_path))
+        return seed
+    return next(s for s in range(len(held) + 1) if s not in held)
 
 
 # (light, bsdf) samples per camera sample for the MIS allocation sweep: ratios 1:0 ... 0:1.
@@ -121,10 +153,8 @@ class Comparison:
     def _render(self, strategy: Strategy, settings: RenderSettings, film: Film | None,
                 estimator: DirectLighting, progress: bool = False):
         """One render; an interrupted one stops the comparison (module docstring)."""
-        result = render(self.scene, strategy, settings, film=film, estimator=estimator, progress=progress)
-        if result.interrupted:
-            raise KeyboardInterrupt
-        return result
+        return render_complete(self.scene, strategy, settings, film=film, estimator=estimator,
+                               progress=progress)
 
     def _measure(self, run: Run) -> Run:
         run.measure(self.reference.mean, self.reference_variance)

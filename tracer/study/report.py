@@ -285,7 +285,8 @@ td:first-child, th:first-child {{ text-align: left; }}
 </style></head><body>
 <h1>{esc(document['scene'])}: sampling strategies compared</h1>
 <p>Mode: <b>{esc(mode['kind'])}</b> ({esc(mode['description'])}). Reference:
-<code>{esc(document['reference'])}</code> ({document['reference_spp']} spp MIS).
+<code>{esc(document['reference'])}</code> ({document['reference_spp']} spp,
+{esc(str(document['reference_strategy']))}).
 relMSE = mean (I&minus;R)&sup2;/(R&sup2;+0.01) and MSE = mean (I&minus;R)&sup2;, each less the
 reference's own variance (its noise, relMSE {number(document['reference_noise']['relmse'])}, which
 adds to every measured error; <code>*_uncorrected</code> in the data are as measured; the error maps
@@ -372,6 +373,7 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
     reference_variance = reference.variance_of_mean()
     document: dict[str, Any] = {
         "scene": scene_name, "reference": reference_path, "reference_spp": reference.spp,
+        "reference_strategy": reference.record.strategy,
         "reference_noise": {
             "relmse": metrics.reference_relmse(reference.mean, reference_variance),
             "mse": float(np.mean(reference_variance)),

@@ -33,7 +33,7 @@ import numpy as np
 from ..atomic import save_figure, write_text
 from ..estimators import DirectLighting
 from ..film import Film
-from ..render_loop import RenderSettings, render
+from ..render_loop import RenderSettings, render_complete
 from ..scene import Scene, load_scene
 from ..strategy import STRATEGIES, Strategy
 from . import metrics, statistics
@@ -147,12 +147,13 @@ def run_case(
     """Every strategy on one case, against a ``reference_spp`` MIS render of it."""
     # The reference always takes 1 light + 1 BSDF sample, so that a sample count that changes
     # the expected value (an image that brightens with the count) shows as bias.
-    reference = render(
+    reference = render_complete(
         scene, Strategy("mis"), RenderSettings(spp=reference_spp, seed=seed + 1_000_000, threads=threads)
     ).film
     cells = []
     for name in STRATEGIES:
-        result = render(scene, case.strategy(name), RenderSettings(spp=spp, seed=seed, threads=threads))
+        settings = RenderSettings(spp=spp, seed=seed, threads=threads)
+        result = render_complete(scene, case.strategy(name), settings)
         film = result.film
         cells.append(
             Cell(
