@@ -220,3 +220,21 @@ def test_an_interrupted_check_neither_judges_nor_writes(baseline_copy, monkeypat
     assert main(["check", "--baseline", str(baseline_copy), "--update"]) == 130
     assert baseline_copy.read_bytes() == before and len(calls) == 2
     assert "interrupted" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("content, words", [
+    (b"[" * 100_000, "nested too deeply"),
+    (b'{"entries": [{"spp": ' + b"7" * 5000 + b"}]}", "not a readable JSON baseline"),
+    (b'{"entries": [\xff]}', "not a readable JSON baseline"),
+    (b'{"entries": [{"scene": "cornell", "strategy": "mis", "spp": 1, "seeds": [1], "a\\nb": 1}]}',
+     "unknown key 'a\\nb'"),
+])
+def test_hostile_baseline_text_is_one_line(content, words, tmp_path, capsys):
+    """JSON nested 100,000 deep (RecursionError), a 5,000-digit number (Python's digit limit,
+    ValueError), bytes that are not UTF-8 (UnicodeDecodeError) and a key holding a newline
+    (printed raw, two lines): each is refused with exit 2 and one line naming the file."""
+    path = tmp_path / "hostile.json"
+    path.write_bytes(content)
+    assert main(["check", "--baseline", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "hostile.json" in err and words in err, err

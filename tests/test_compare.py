@@ -420,3 +420,15 @@ def test_compare_refuses_references_it_cannot_measure_with(tmp_path, capsys):
                  "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "/proc/tracer/x: cannot write into this folder" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_insets_fit_images_narrower_than_a_window():
+    """A 1x8 image (a legal camera of width 1) gets inset windows inside it: the window size
+    was at least 8 pixels whatever the image, and the outline then indexed past its edge."""
+    from tracer.study.report import pick_insets
+
+    reference = Film(1, 8)
+    reference.add_block(0, np.ones((8, 2, 3)))
+    run = compare_mod.Run(Strategy("mis"), reference.copy(), 1.0)
+    for x, y, w, h in pick_insets([run, run], reference):
+        assert 0 <= x and x + w <= 1 and 0 <= y and y + h <= 8 and w >= 1 and h >= 1

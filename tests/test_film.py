@@ -193,3 +193,22 @@ def test_damaged_header_bytes_give_one_line_not_a_traceback(tmp_path):
                 assert np.all(np.isfinite(back.mean)) and np.all(np.isfinite(back.variance()))
                 outcomes["read"] += 1
     assert outcomes["refused"] > 0
+
+
+def test_counts_past_32_bits_round_trip(tmp_path):
+    """tracer:spp of a pool past 2^31 samples (EXR integer attributes are 32-bit: writing it
+    raised std::bad_cast) is stored so that it reads back exactly."""
+    film = Film(2, 1, np.array([2**31 + 5, 2**31 + 5]), np.ones((2, 3)), np.ones((2, 3)))
+    write_exr(tmp_path / "big.exr", film)
+    assert read_exr(tmp_path / "big.exr").spp == 2**31 + 5
+
+
+def test_values_past_float32_are_refused_not_written_as_inf(tmp_path):
+    """A mean of 1e20 is a float32 number, its variance (about its square) is not: the write is
+    refused with one line naming the channel and pixel, and no file appears (it used to be
+    written with inf variances, exit 0)."""
+    film = Film(2, 1)
+    film.add_block(0, np.array([[[1.0, 1.0, 1.0], [3.0, 1.0, 1.0]], [[1e20, 0.0, 0.0], [-1e20, 0.0, 0.0]]]))
+    with pytest.raises(InputError, match=r"channel 'variance.R' at pixel \(1, 0\) exceeds"):
+        write_exr(tmp_path / "r.exr", film)
+    assert list(tmp_path.iterdir()) == []

@@ -77,3 +77,22 @@ def test_point_light_is_invisible_to_direction_sampling():
         result = render(scene, Strategy(strategy), RenderSettings(spp=2, seed=1))
         assert result.nonfinite == 0
         assert np.array_equal(result.film.mean, np.zeros_like(result.film.mean)), strategy
+
+
+def test_a_light_too_small_for_float32_is_left_out_of_the_light_table():
+    """An emitting sphere of radius 1e-20 at the origin passes the radius rule (1e-6 of the
+    centre's magnitude, which is 0), but its triangles' areas are below float32's smallest
+    normal number, so 1 / area in the light table was inf. Its triangles are left out like
+    zero-area ones: the table stays finite and holds only the other light."""
+    from tracer.lights import build_tables
+
+    scene = load_scene({
+        "camera": {"origin": [0.0, 0.0, 3.0], "target": [0.0, 0.0, 0.0], "fov": 40.0,
+                   "width": 4, "height": 4},
+        "shapes": [{"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 1e-20,
+                    "emission": [1.0, 1.0, 1.0]},
+                   {"type": "quad", "origin": [-1.0, 1.0, -1.0], "edge1": [2.0, 0.0, 0.0],
+                    "edge2": [0.0, 0.0, 2.0], "emission": [1.0, 1.0, 1.0]}],
+    })
+    tables, owner = build_tables(scene)
+    assert np.all(np.isfinite(tables.rows)) and set(owner.tolist()) == {1}

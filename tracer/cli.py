@@ -260,11 +260,17 @@ def _exr_path(text: str) -> Path:
     if output.suffix.lower() != ".exr":
         raise InputError("output must end in .exr", str(output))
     folder = output.parent if str(output.parent) else Path(".")
-    if not folder.is_dir():
-        raise InputError("output folder does not exist", str(folder))
-    for path in (output, output.with_suffix(".png")):
-        if path.is_dir():
-            raise InputError("is a folder, not a file that can be written", str(path))
+    try:
+        if not folder.is_dir():
+            raise InputError("output folder does not exist", str(folder))
+        for path in (output, output.with_suffix(".png")):
+            if path.is_dir():
+                raise InputError("is a folder, not a file that can be written", str(path))
+        # The temporary file's name is longer than the output's (atomic.TEMPORARY_TAG).
+        if len(output.name.encode()) + 20 > os.pathconf(folder, "PC_NAME_MAX"):
+            raise InputError("file name too long", str(output))
+    except OSError as exc:  # a name too long for the file system, a loop of links, ...
+        raise InputError(f"cannot use this output name: {exc.strerror or exc}", str(output)[:300]) from None
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError("output folder is not writable", str(folder))
     return output

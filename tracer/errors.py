@@ -18,4 +18,11 @@ class InputError(Exception):
             prefix += f"{where}: "
         if key:
             prefix += f"{key}: "
-        super().__init__(prefix + message)
+        super().__init__(one_line(prefix + message))
+
+
+def one_line(text: str) -> str:
+    """``text`` with every character that is not printable (a newline or a terminal escape in a
+    key, a file name or a material name the user wrote) shown as its escape, so that an error
+    is always one line and cannot drive the terminal."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)

@@ -46,7 +46,14 @@ def write_exr(path: str | os.PathLike[str], film: Film, half: bool = False) -> N
     planes = [film.mean, film.variance()]
     if not film.uniform:
         planes.append(film.count[:, None].astype(np.float64))
-    pixels = np.ascontiguousarray(np.concatenate(planes, axis=1), dtype=np.float32)
+    with np.errstate(over="ignore"):
+        pixels = np.ascontiguousarray(np.concatenate(planes, axis=1), dtype=np.float32)
+    bad = ~np.all(np.isfinite(pixels), axis=1)
+    if bad.any():
+        # A mean near float32's limit whose variance (its square) is not: never written as inf.
+        channel = names[int(np.argmax(~np.isfinite(pixels[np.argmax(bad)])))]
+        raise InputError(f"channel '{channel}' at {_pixel(bad, film.width)} exceeds what a 32-bit float "
+                         "holds (3.4e38); nothing was written", str(path))
     pixels = pixels.reshape(film.height, film.width, -1)
     spec = oiio.ImageSpec(film.width, film.height, len(names), "half" if half else "float")
     spec.channelnames = tuple(names)
@@ -55,7 +62,9 @@ def write_exr(path: str | os.PathLike[str], film: Film, half: bool = False) -> N
         # half range (65504) and would read back as inf.
         spec.channelformats = (oiio.TypeDesc("half"),) * 3 + (oiio.TypeDesc("float"),) * (len(names) - 3)
     spec.attribute("compression", "zip")
-    spec.attribute(SPP_ATTRIBUTE, int(film.spp))
+    # EXR integer attributes are 32-bit: larger counts as decimal strings (read back by _sample_count).
+    spp = int(film.spp)
+    spec.attribute(SPP_ATTRIBUTE, spp if spp < 2**31 else str(spp))
     for key, value in film.record.attributes().items():
         spec.attribute(key, value)
     atomic_write(path, lambda tmp: _write(tmp, spec, pixels))
@@ -133,7 +142,7 @@ def _sample_count(value, path: str) -> int:
     """The header's ``tracer:spp`` as a count, or InputError naming it."""
     try:
         count = int(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         count = -1
     if isinstance(value, float) and value != count or not 0 <= count <= MAX_COUNT:
         raise InputError(f"header attribute {SPP_ATTRIBUTE} = {value!r} is not a sample count", path)

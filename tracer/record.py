@@ -179,6 +179,10 @@ class RenderRecord:
                 except (TypeError, ValueError, OverflowError) as exc:
                     raise InputError(f"header attribute {PREFIX + name} = {raw!r} is not a valid "
                                      f"{name}: {exc}") from None
+        for name, allowed in _names().items():
+            if name in values and values[name] not in allowed:
+                raise InputError(f"header attribute {PREFIX}{name} = {values[name]!r} is not one of "
+                                 f"{', '.join(allowed)}")
         seed, first, nxt = (values.pop(k, None) for k in ("seed", "first_sample", "next_sample"))
         one = None
         if seed is not None:
@@ -194,6 +198,15 @@ class RenderRecord:
             raise InputError(f"header attributes {PREFIX}samples ({format_ranges(values['samples'])}) and "
                              f"{PREFIX}seed/first_sample/next_sample ({format_ranges(one)}) disagree")
         return cls(**values)
+
+
+def _names() -> dict[str, tuple[str, ...]]:
+    """The values a header's named fields may take where tracer acts on them: a resume renders
+    with the file's sampler. (The strategy and heuristic are only compared and shown, and other
+    tools name theirs as they like: the Mitsuba cross-check writes ``mitsuba-direct``.)"""
+    from .samplers import SAMPLERS
+
+    return {"sampler": SAMPLERS}
 
 
 def _whole(value: Any) -> int:

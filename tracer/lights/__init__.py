@@ -42,6 +42,8 @@ TECHNIQUES = (triangle_area.NAME, point.NAME)  # the code of a technique is its 
 TRIANGLE_AREA, POINT = 0, 1
 ROW_WIDTH = max(triangle_area.WIDTH, point.WIDTH)
 SELECTIONS = ("power", "uniform")
+# Smallest emitting triangle the light table takes: 1 / area must be finite in float32.
+MIN_LIGHT_AREA = float(np.finfo(np.float32).tiny)
 
 
 class LightTables(NamedTuple):
@@ -113,7 +115,10 @@ def build_tables(scene, light_selection: str = "power") -> tuple[LightTables, np
     if light_selection not in SELECTIONS:
         raise ValueError(f"light selection must be one of {SELECTIONS}, got {light_selection!r}")
     # Emission is >= 0, so a triangle with area and some positive channel has positive flux.
-    tri = np.flatnonzero((scene.area > 0.0) & (scene.emission.max(axis=1, initial=0.0) > 0.0))
+    # The table holds 1 / area in float32: a triangle smaller than float32's smallest normal
+    # number (a sphere of radius 1e-20) would put inf there, so it is left out like a zero-area
+    # one (never light-sampled; a BSDF sample that hits it gets weight 1, consistently).
+    tri = np.flatnonzero((scene.area >= MIN_LIGHT_AREA) & (scene.emission.max(axis=1, initial=0.0) > 0.0))
     tri_flux = np.pi * scene.area[tri] * scene.emission[tri].mean(axis=1)
     point_flux = 4.0 * np.pi * scene.point_intensity.mean(axis=1)
     points = np.flatnonzero(point_flux > 0.0)

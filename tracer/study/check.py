@@ -140,8 +140,11 @@ def load_baseline(path: str | os.PathLike[str]) -> list[Entry]:
             doc = json.load(fh)
     except FileNotFoundError:
         raise InputError("no such baseline file (create one with --update)", path) from None
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputError(f"not a readable JSON baseline: {exc}", path) from None
+    except RecursionError:
+        raise InputError("not a baseline: JSON nested too deeply", path) from None
+    except (OSError, ValueError) as exc:
+        # JSONDecodeError, text that is not UTF-8, integers past Python's digit limit: all ValueError.
+        raise InputError(f"not a readable JSON baseline: {str(exc)[:200]}", path) from None
     if not isinstance(doc, dict) or not isinstance(doc.get("entries"), list):
         raise InputError('expected an object with a list "entries"', path)
     entries = []
@@ -374,6 +377,12 @@ def run_check(
     """
     baseline = Path(baseline)
     entries = entries if entries is not None else load_baseline(baseline)
+    if not update:  # what judging needs, before any rendering
+        for i, e in enumerate(entries):
+            for name in ("relmse", "variance"):
+                if getattr(e, name) is None or not getattr(e, f"{name}_seeds"):
+                    raise InputError(f"no {name} and {name}_seeds to judge against; run tracer check "
+                                     "--update", str(baseline), f"entries[{i}]")
     base = baseline.parent
     result = CheckResult()
     for e in entries:

@@ -104,7 +104,7 @@ def pick_insets(runs: list[Run], reference: Film, count: int = 2) -> list[tuple[
     a sixth of the image, non-overlapping."""
     ref = reference.image()
     h, w = ref.shape[:2]
-    size = max(8, min(w, h) // 6)
+    size = min(max(8, min(w, h) // 6), w, h)  # at least 8 pixels, but never past the image
     logs = [np.log10(metrics.box_blur(metrics.relative_squared_error(r.film.image(), ref).mean(axis=2), 2)
                      + 1e-8) for r in runs]
     spread = np.std(np.stack(logs), axis=0) if len(logs) > 1 else logs[0]
