@@ -1,0 +1,39 @@
+"""A seeded slice of the fuzzer in benchmarks/fuzz.py, which holds the code (one copy): hostile
+scene files, meshes, render EXRs and noise baselines, each run through tracer's API and CLI."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+fuzz = importlib.import_module("fuzz")  # by name on sys.path: its worker process imports it too
+
+
+def run_slice(tmp_path: Path, seed: int, scenes: int, exrs: int, baselines: int) -> None:
+    keep = tmp_path / "keep"
+    report = fuzz.run(seed=seed, scenes=scenes, exrs=exrs, baselines=baselines, jobs=2, timeout=120.0,
+                      keep=keep, progress=False, workdir=tmp_path)
+    assert report.outcomes, "the fuzzer ran no checks"
+    if report.failures:
+        pytest.fail(fuzz.format_report(report, keep), pytrace=False)
+
+
+def test_fuzz_slice(tmp_path):
+    """Every outcome of 20 seeded hostile inputs (10 scenes, 6 EXRs, 4 baselines; about 40 s)
+    is compared with the bad-input promise: exit 0 with finite EXR/JSON/CSV outputs, or exit 2
+    with exactly one stderr line, and in-process only tracer.InputError. It fails when tracer
+    prints a traceback, dies from a signal, runs past 120 s, writes NaN or inf, or refuses in
+    more or fewer than one line; the inputs are a function of the seed, so a failure repeats
+    (`python benchmarks/fuzz.py --seed 0 --only FAMILY:INDEX`) and the report names each one."""
+    run_slice(tmp_path, seed=0, scenes=10, exrs=6, baselines=4)
+
+
+@pytest.mark.slow
+def test_fuzz_bigger(tmp_path):
+    """The same comparison over 200 other inputs (120 scenes, 50 EXRs, 30 baselines; a few
+    minutes): rarer mutations and their combinations."""
+    run_slice(tmp_path, seed=1, scenes=120, exrs=50, baselines=30)
