@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -511,3 +512,56 @@ def test_a_billion_spp_render_has_flat_memory_and_stops_on_ctrl_c(tmp_path):
     assert late - early < 40.0, (early, late)
     assert proc.returncode == 130, err
     assert 0 < read_exr(out).spp < 1_000_000_000
+
+
+def test_a_reference_is_replaced_only_when_asked_and_resumes_with_its_own_settings(tmp_path, capsys):
+    """`reference` onto an existing file: refused (it silently replaced a 512-spp reference with
+    16 spp) unless --force. --resume takes the file's resolution and estimator settings when
+    they are not given (it failed unless --width/--height were repeated), and refuses them when
+    given otherwise."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    out = tmp_path / "ref.exr"
+    base = ["reference", str(scene), "-o", str(out), "--quiet"]
+    assert main(base + ["--spp", "2", "--width", "8", "--heuristic", "balance"]) == 0
+    before = out.read_bytes()
+    assert main(base + ["--spp", "2"]) == 2
+    refusal = "a reference exists here: --resume adds samples to it, --force replaces it"
+    assert refusal in capsys.readouterr().err
+    assert out.read_bytes() == before
+    assert main(base + ["--spp", "2", "--resume"]) == 0  # 8x6 and balance, from the file
+    grown = read_exr(out)
+    assert (grown.width, grown.height, grown.spp, grown.record.heuristic) == (8, 6, 4, "balance")
+    assert main(base + ["--spp", "2", "--resume", "--heuristic", "power"]) == 2
+    assert "tracer:heuristic" in capsys.readouterr().err
+    assert main(base + ["--spp", "1", "--force"]) == 0
+    assert read_exr(out).spp == 1 and read_exr(out).width == 16
+
+
+def test_one_side_keeps_the_aspect_ratio():
+    """--width alone on a 16x12 camera gives 32x24, --height alone 8x6 (it gave a 32x12
+    sliver); both given are taken as they are."""
+    tables = tomllib.loads(GOOD)
+    assert (load_scene(tables, width=32).camera.width, load_scene(tables, width=32).camera.height) == (32, 24)
+    assert (load_scene(tables, height=6).camera.width, load_scene(tables, height=6).camera.height) == (8, 6)
+    assert (load_scene(tables, 5, 40).camera.width, load_scene(tables, 5, 40).camera.height) == (5, 40)
+
+
+def test_default_names_tell_settings_apart_and_the_summary_says_them(tmp_path, monkeypatch, capsys):
+    """Renders with other settings get other default names (balance and max wrote the same
+    veach_mis_mis.exr over each other); the summary names the light selection; a scene without
+    lights gets a warning instead of a silent black image."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    monkeypatch.chdir(tmp_path)
+    for options in ([], ["--heuristic", "max"], ["--light-samples", "2", "--one-sample"],
+                    ["--strategy", "light", "--light-selection", "uniform", "--seed", "5"]):
+        assert main(["render", str(scene), "--spp", "1", *options]) == 0
+    names = sorted(p.name for p in tmp_path.glob("*.exr"))
+    assert names == ["s_light_uniform-lights_seed5.exr", "s_mis.exr", "s_mis_l2_b1_one-sample.exr",
+                     "s_mis_max.exr"]
+    assert "light (lights picked uniformly)" in capsys.readouterr().err
+    dark = tmp_path / "dark.toml"
+    dark.write_text(GOOD.replace("emission = [5.0, 5.0, 5.0]", ""))
+    assert main(["render", str(dark), "--spp", "1", "--quiet"]) == 0
+    assert "has no lights" in capsys.readouterr().err

@@ -104,9 +104,13 @@ def build_parser() -> argparse.ArgumentParser:
     ref.add_argument("--resume", action="store_true",
                      help="add --spp samples to the existing OUTPUT (fresh random numbers; spp adds up)")
     ref.add_argument("--float", action="store_true", help="store 32-bit floats instead of half")
+    ref.add_argument("--force", action="store_true", help="replace an existing OUTPUT (without it, "
+                     "an existing reference is only ever grown, with --resume)")
     _add_strategy_options(ref)
     _add_render_options(ref)
-    ref.set_defaults(run=cmd_reference)
+    # None = not given: a resume takes these from the file, a new reference the usual defaults.
+    ref.set_defaults(run=cmd_reference, heuristic=None, light_samples=None, bsdf_samples=None,
+                     one_sample=None, light_selection=None)
 
     c = sub.add_parser("compare", help="compare strategies against a reference: images, maps, charts",
                        description="Render several strategies at equal spp or equal time and compare them "
@@ -168,7 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
         "sample counts) and check what must hold; exit 1 if anything does not.",
     )
     st.add_argument("--out", default="stability", help="folder for stability.json and stability.png")
-    st.add_argument("--spp", type=_spp, default=64, help="samples per pixel per strategy")
+    st.add_argument("--spp", type=_spp, default=64, help="samples per pixel per strategy (default 64)")
     st.add_argument("--reference-spp", type=_spp, default=1024,
                     help="spp of each case's MIS reference (default 1024)")
     st.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
@@ -361,6 +365,13 @@ def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, 
     return EXIT_INTERRUPTED if result.interrupted else 0
 
 
+def _warn_if_dark(scene) -> None:
+    """A scene without any light renders black: say so rather than let a black image puzzle."""
+    if not scene.has_lights:
+        print(f"tracer: warning: {scene.path} has no lights (no emission, no point lights): the image "
+              "will be black", file=sys.stderr)
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from . import scene as scene_mod
     from .render_loop import RenderSettings, render
@@ -370,7 +381,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     defaults = scene.render_defaults
     strategy = _strategy_from(args, args.strategy or defaults.get("strategy", "mis"))
     spp = args.spp or defaults.get("spp", 64)
-    output = _exr_path(args.output or f"{scene.name}_{strategy.name}.exr")
+    # The default name tells settings apart (mis_balance, light_x4, seed 5), so that renders
+    # with other options do not overwrite each other.
+    seed_part = f"_seed{args.seed}" if args.seed else ""
+    output = _exr_path(args.output or f"{scene.name}_{strategy.file_stem}{seed_part}.exr")
+    _warn_if_dark(scene)
     settings = RenderSettings(spp=spp, seed=args.seed, threads=args.threads)
     result = render(scene, strategy, settings, progress=not args.quiet)
     return _finish(result, scene, strategy, output, spp, args.quiet, args.exposure)
@@ -381,19 +396,34 @@ def cmd_reference(args: argparse.Namespace) -> int:
     from .imagefiles import read_exr
     from .render_loop import RenderSettings, render
 
-    scene = scene_mod.load_scene(args.scene, args.width, args.height)
-    strategy = _strategy_from(args, "mis")
-    output = _exr_path(args.output or f"{scene.name}_reference.exr")
+    output = _exr_path(args.output or f"{Path(args.scene).stem}_reference.exr")
     film, seed, first, sampler = None, args.seed, 0, "independent"
+    defaults = {"heuristic": "power", "light_samples": 1, "bsdf_samples": 1, "one_sample": False,
+                "light_selection": "power"}
+    width, height = args.width, args.height
     if args.resume:
         if not output.is_file():
             raise InputError("--resume: no reference to resume", str(output))
         film = read_exr(output)
-        if (film.width, film.height) != (scene.camera.width, scene.camera.height):
-            raise InputError(f"--resume: the reference is {film.width}x{film.height}, the scene "
-                             f"{scene.camera.width}x{scene.camera.height}", str(output))
         if film.record.strategy != "mis":
             raise InputError("--resume: not an MIS reference", str(output))
+        # The file's resolution and estimator settings, unless given (and then they must agree).
+        width, height = width or film.width, height or film.height
+        defaults.update({name: getattr(film.record, name) for name in defaults
+                         if getattr(film.record, name) is not None})
+    elif output.exists() and not args.force:
+        raise InputError("a reference exists here: --resume adds samples to it, --force replaces it",
+                         str(output))
+    for name, value in defaults.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    scene = scene_mod.load_scene(args.scene, width, height)
+    strategy = _strategy_from(args, "mis")
+    _warn_if_dark(scene)
+    if film is not None:
+        if (film.width, film.height) != (scene.camera.width, scene.camera.height):
+            raise InputError(f"--resume: the reference is {film.width}x{film.height}, not the "
+                             f"{scene.camera.width}x{scene.camera.height} asked for", str(output))
         # The reference's seed (its last one, if merged from several) from above every index it
         # holds: fresh random numbers that never repeat the samples it has.
         held = film.record.samples or ()

@@ -70,11 +70,33 @@ class Strategy:
     @property
     def label(self) -> str:
         """A short description such as ``mis (power, 1 light + 1 bsdf)``."""
+        uniform = self.light_count and self.light_selection == "uniform"
+        selection = ", lights picked uniformly" if uniform else ""
         if self.name == "mis":
             mode = "one-sample, " if self.one_sample else ""
-            return f"mis ({mode}{self.heuristic}, {self.light_samples} light + {self.bsdf_samples} bsdf)"
+            return (f"mis ({mode}{self.heuristic}, {self.light_samples} light + {self.bsdf_samples} bsdf"
+                    f"{selection})")
         count = self.light_count or self.direction_count
-        return self.name if count == 1 else f"{self.name} (x{count})"
+        parts = ([f"x{count}"] if count != 1 else []) + ([selection[2:]] if selection else [])
+        return f"{self.name} ({', '.join(parts)})" if parts else self.name
+
+    @property
+    def file_stem(self) -> str:
+        """A file-name part that tells this strategy's settings apart from the defaults':
+        ``mis``, ``mis_balance``, ``mis_l2_b1_one-sample``, ``light_x4_uniform-lights``."""
+        parts = [self.name]
+        if self.name == "mis":
+            if self.heuristic != "power":
+                parts.append(self.heuristic)
+            if (self.light_samples, self.bsdf_samples) != (1, 1):
+                parts.append(f"l{self.light_samples}_b{self.bsdf_samples}")
+            if self.one_sample:
+                parts.append("one-sample")
+        elif (self.light_count or self.direction_count) != 1:
+            parts.append(f"x{self.light_count or self.direction_count}")
+        if self.light_count and self.light_selection == "uniform":
+            parts.append("uniform-lights")
+        return "_".join(parts)
 
     @property
     def light_count(self) -> int:

@@ -141,6 +141,11 @@ class Scene:
         return digest.hexdigest()
 
     @property
+    def has_lights(self) -> bool:
+        """Whether anything emits: a shape with emission or a point light with intensity."""
+        return bool(np.any(self.emission > 0.0)) or bool(np.any(self.point_intensity > 0.0))
+
+    @property
     def light_of_triangle(self) -> np.ndarray:
         """(F,) int32: the index of the emissive shape (area light) a triangle belongs to, in the
         order of the emissive shapes; -1 for triangles of shapes that do not emit."""

@@ -274,8 +274,14 @@ def _read_camera(r: _Reader, width: int | None, height: int | None) -> Camera:
     cos_up = abs(np.dot(forward, up)) / (np.linalg.norm(forward) * np.linalg.norm(up))
     if cos_up > 1.0 - 1e-9:
         r.fail("degenerate camera: up is parallel to the viewing direction", "up")
-    w = w if width is None else width
-    h = h if height is None else height
+    # One side given: the other follows the file's aspect ratio (a --width alone must not squash
+    # the frame into a sliver), rounded, at least one pixel.
+    if width is not None and height is None:
+        w, h = width, max(1, round(width * h / w))
+    elif height is not None and width is None:
+        w, h = max(1, round(height * w / h)), height
+    elif width is not None:
+        w, h = width, height
     check_resolution(w, h, r.path, "camera.width/height")
     return Camera(origin, target, up, fov, int(w), int(h))
 

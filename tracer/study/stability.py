@@ -323,7 +323,10 @@ def heat_map(cells: list[Cell], path: Path) -> None:
     for c in cells:
         i, j = names.index(c.case), STRATEGIES.index(c.strategy)
         if c.blind:
-            ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, color="#dddddd", hatch="//", ec="#999999"))
+            # facecolor and edgecolor apart: ``color`` set both, and the hatch (drawn in the edge
+            # colour) vanished into the face.
+            ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, facecolor="#eeeeee", edgecolor="#888888",
+                                       hatch="///", linewidth=0.0))
             ax.text(j, i, "blind: 0", ha="center", va="center", fontsize=7, color="#444444")
         else:
             bad = f"\n{c.nonfinite} NaN/Inf" if c.nonfinite else ""
