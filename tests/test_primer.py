@@ -377,3 +377,21 @@ def test_main_rejects_a_file_as_output_folder(tmp_path):
     path.write_text("x")
     with pytest.raises(InputError, match="not a folder"):
         primer.main(path, 0)
+
+
+def test_rejection_figure_draws_its_circles_round():
+    """The rejection figure's circles (the incircles of the triangle and the square) are as wide
+    as they are tall on the page: both panels have equal aspect, one unit as long in x as in y.
+    Fails if a panel lets its axes box set the scale instead, which draws the circle as an oval
+    (the triangle's panel spans 1 unit across and 0.87 up)."""
+    from matplotlib.patches import Circle
+
+    result = primer.rejection(np.random.default_rng(0), None, n=100, trials=20, dims=(2, 3), points=500)
+    fig = primer.rejection_figure(np.random.default_rng(1), result)
+    fig.canvas.draw()
+    circles = [patch for ax in fig.axes for patch in ax.patches if isinstance(patch, Circle)]
+    assert len(circles) == 2
+    for circle in circles:
+        box = circle.get_window_extent()
+        assert box.width == pytest.approx(box.height)
+    primer._pyplot().close(fig)

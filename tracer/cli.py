@@ -123,13 +123,25 @@ def build_parser() -> argparse.ArgumentParser:
     budget = c.add_mutually_exclusive_group(required=True)
     budget.add_argument("--spp", type=_spp, help="equal samples: every strategy renders N spp")
     budget.add_argument("--time", type=_positive_float, metavar="SECONDS",
-                        help="equal time: every strategy renders for SECONDS")
+                        help="equal time: every strategy renders for SECONDS of wall-clock time "
+                        "(elapsed, as a user waits; --clock cpu for CPU time)")
     c.add_argument("--out", default="compare", help="output folder (default ./compare)")
     c.add_argument("--sweep", action="store_true",
-                   help="also: relMSE at spp 1, 2, 4, ... (charts with fitted slopes) and the MIS "
-                   "light:BSDF allocation sweep")
+                   help="also: relMSE at spp 1, 2, 4, ... averaged over --sweep-seeds seeds (charts "
+                   "with fitted slopes and their 95%% intervals) and the MIS light:BSDF allocation sweep")
+    c.add_argument("--sweep-seeds", type=_int_in(2, 1000), default=8, metavar="N",
+                   help="independent seeds per sweep point, none of which the reference holds (default 8)")
     c.add_argument("--target", type=_positive_float, default=0.01,
-                   help="relMSE whose time-to-reach is reported by --sweep (default 0.01)")
+                   help="relMSE whose time to reach --sweep reports, with its interval, where the sweep "
+                   "supports it (default 0.01)")
+    c.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                   help="what render time is: wall (default: elapsed wall-clock time of each render) or "
+                   "cpu (process CPU time of each render summed over its threads: up to --threads times "
+                   "the wall time; on a shared machine other processes inflate it far less); --time, "
+                   "efficiency and the sweep's times use it")
+    c.add_argument("--figure-format", action="append", metavar="FMT",
+                   help="also write the charts and maps as FMT: pdf or svg (vector; repeatable or "
+                   "comma-separated; PNG at 300 dpi is always written)")
     c.add_argument("--crop", action="append", type=_crop, metavar="X,Y,W,H",
                    help="inset region in pixels (repeatable; default: chosen where strategies differ most)")
     _add_strategy_options(c)
@@ -459,9 +471,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from .imagefiles import read_exr
     from .strategy import STRATEGIES, Strategy
     from .study import report
-    from .study.compare import ALLOCATIONS, Comparison, independent_seed, scene_for_reference
+    from .study.compare import ALLOCATIONS, Comparison, independent_seeds, scene_for_reference
 
     names = [n.strip() for n in args.strategies.split(",") if n.strip()]
+    formats = [f.strip().lower() for text in args.figure_format or [] for f in text.split(",") if f.strip()]
+    bad = [f for f in formats if f not in report.FIGURE_FORMATS]
+    if bad:
+        raise InputError(f"--figure-format: unknown format '{bad[0]}' (expected some of "
+                         f"{', '.join(report.FIGURE_FORMATS)})", "command line")
     unknown = [n for n in names if n not in STRATEGIES]
     if unknown or not names:
         raise InputError(f"--strategies: unknown strategy '{unknown[0] if unknown else ''}' "
@@ -473,15 +490,16 @@ def cmd_compare(args: argparse.Namespace) -> int:
             raise InputError(f"--crop {x},{y},{w},{h} leaves the {reference.width}x{reference.height} image",
                              "command line")
     out = _output_folder(args.out)
-    seed = independent_seed(reference, args.seed, args.reference)
-    comparison = Comparison(scene, reference, seed, args.threads, progress=not args.quiet)
+    seeds = independent_seeds(reference, args.seed, args.sweep_seeds if args.sweep else 1, args.reference)
+    comparison = Comparison(scene, reference, seeds[0], args.threads, progress=not args.quiet,
+                            clock=args.clock)
 
     def run(strategy):
         if args.time:
             return comparison.equal_time(strategy, args.time)
         return comparison.equal_spp(strategy, args.spp)
 
-    mode = report.describe_mode(args.spp, args.time)
+    mode = report.describe_mode(args.spp, args.time, args.clock)
     if not args.quiet:
         print(f"{scene.name}: {mode['description']} at {reference.width}x{reference.height}", file=sys.stderr)
     try:
@@ -489,8 +507,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         sweep, allocation = [], []
         if args.sweep:
             for name in names:
-                sweep += comparison.convergence(_strategy_from(args, name), max_spp=args.spp,
-                                                budget=args.time)
+                sweep += comparison.sweep(_strategy_from(args, name), seeds, max_spp=args.spp,
+                                          budget=args.time)
             allocation = [run(Strategy("mis", args.heuristic, n_light, n_bsdf,
                                        light_selection=args.light_selection))
                           for n_light, n_bsdf in ALLOCATIONS]
@@ -502,14 +520,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
     # The report is many files; a signal while they are written is held until all are.
     with interrupts.deferred() as arrived:
         document = report.make_report(out, scene.name, args.reference, reference, runs, mode, sweep,
-                                      allocation, args.crop, args.exposure, args.target)
+                                      allocation, args.crop, args.exposure, args.target, tuple(formats))
     if not args.quiet:
         width = max(len(r["name"]) for r in document["results"])
-        print(f"\n{'strategy':<{width}}  {'spp':>6} {'seconds':>8} {'relMSE':>10} {'efficiency':>11}",
+        seconds = "CPU s" if args.clock == "cpu" else "seconds"
+        print(f"\n{'strategy':<{width}}  {'spp':>6} {seconds:>8} {'relMSE':>10} {'efficiency':>11}",
               file=sys.stderr)
         for r in document["results"]:
             print(f"{r['name']:<{width}}  {r['spp']:>6} {r['seconds']:>8.2f} "
                   f"{report.number(r['relmse']):>10} {report.number(r['efficiency']):>11}", file=sys.stderr)
+        sweep_lines = report.terminal_tables(document)
+        if sweep_lines:
+            print("", *sweep_lines, sep="\n", file=sys.stderr)
         print(f"-> {out / 'index.html'}", file=sys.stderr)
     if arrived:
         print(f"tracer: interrupted while writing the report; it was completed first: {out}", file=sys.stderr)

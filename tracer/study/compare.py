@@ -1,10 +1,20 @@
 """Strategy comparisons: equal-spp and equal-time renders, convergence and allocation sweeps.
 
 This module renders and measures; ``report.py`` turns the results into files. Render time
-is the wall time of ``render()`` alone: the Embree scene is built once and shared, so every
-strategy pays the same setup and none is charged for it. Each run's film carries the render
-record that ``render()`` sets (strategy, seed, sample range, seconds), which the report writes
-into the run's EXR header.
+is the time of ``render()`` alone, on one of two clocks (``CLOCKS``): ``wall``, the elapsed
+time ``render()`` measures (the default: what a user waits), or ``cpu``, the process CPU time
+of the call (``time.process_time``), summed over all the render's threads, which other
+processes on a shared machine inflate far less. The Embree scene is built once and shared, so
+every strategy pays the same setup and none is charged for it. Each run's film carries the
+render record that ``render()`` sets (strategy, seed, sample range, wall seconds), which the
+report writes into the run's EXR header.
+
+Convergence sweeps render each strategy progressively (1, 2, 4, ... spp) once per seed, with
+several independent seeds, and are summarized by the mean over seeds at each spp: the expected
+relMSE of an unbiased estimator falls exactly as 1/spp, but a single run of a heavy-tailed
+estimator does not show it until its rare large samples have been drawn. Fitted slopes and
+times to a target relMSE carry confidence intervals from the jackknife over seeds (the seeds
+are the independent units; points of one seed share their samples).
 
 Errors are measured with the reference's own variance subtracted (``metrics``), so that a
 noisy reference does not make every strategy look worse by the same amount and hide their
@@ -15,10 +25,14 @@ less time than the others, so no partial result is measured.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import sys
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +40,8 @@ from ..embree import RayCaster
 from ..errors import InputError
 from ..estimators import DirectLighting
 from ..film import Film
-from ..render_loop import RenderSettings, render_complete
+from ..record import MAX_SAMPLE_INDEX, MAX_SEED
+from ..render_loop import RenderResult, RenderSettings, render_complete
 from ..scene import Scene, load_scene
 from ..strategy import Strategy
 from . import metrics
@@ -78,22 +93,48 @@ def independent_seed(reference: Film, seed: int | None, reference_path: str | Pa
     *are* an N-spp MIS render), and subtracting the reference's variance would then favour it.
     A reference that does not say which samples it holds cannot be checked: seed 0 is avoided
     by default (tracer's default seed) and a note says so."""
+    return independent_seeds(reference, seed, 1, reference_path)[0]
+
+
+def independent_seeds(reference: Film, seed: int | None, count: int, reference_path: str | Path) -> list[int]:
+    """``count`` distinct seeds none of which the reference holds samples of (the rule of
+    :func:`independent_seed`): ``seed`` (refused if the reference holds it) and the next seeds
+    above it that it does not hold, or with None the smallest such seeds. The comparison's
+    renders use the first; a convergence sweep uses all of them, one progressive render each."""
     held = {s for s, _, _ in reference.record.samples or ()}
     if reference.record.samples is None:
         print(f"tracer: note: {reference_path} does not say which samples it holds: the comparison's "
               "renders cannot be checked to be independent of it", file=sys.stderr)
         held = {0}
-    if seed is not None:
-        if seed in held:
-            raise InputError(f"--seed {seed}: the reference holds samples of seed {seed}, so the "
-                             "comparison would share its random numbers; use another seed or leave "
-                             "--seed out", str(reference_path))
-        return seed
-    return next(s for s in range(len(held) + 1) if s not in held)
+    if seed is not None and seed in held:
+        raise InputError(f"--seed {seed}: the reference holds samples of seed {seed}, so the "
+                         "comparison would share its random numbers; use another seed or leave "
+                         "--seed out", str(reference_path))
+    seeds: list[int] = []
+    candidate = 0 if seed is None else seed
+    while len(seeds) < count:
+        if candidate > MAX_SEED:
+            raise InputError(f"--seed {seed}: no room for {count} seeds from it below 2^64",
+                             str(reference_path))
+        if candidate not in held:
+            seeds.append(candidate)
+        candidate += 1
+    return seeds
 
 
 # (light, bsdf) samples per camera sample for the MIS allocation sweep: ratios 1:0 ... 0:1.
 ALLOCATIONS = ((4, 0), (3, 1), (2, 2), (1, 3), (0, 4))
+
+# What render time is measured on (module docstring).
+CLOCKS = ("wall", "cpu")
+
+# Convergence sweeps: the first spp used in fits (1 and 2 spp carry start-up costs in time and
+# are the most heavily skewed in error); the confidence of the intervals given for slopes and
+# times; and how far beyond the sweep's longest (mean) time a time to target may be
+# extrapolated along the fitted line.
+FIT_MIN_SPP = 4
+CONFIDENCE = 0.95
+EXTRAPOLATION_LIMIT = 4.0
 
 
 @dataclass
@@ -102,10 +143,13 @@ class Run:
 
     strategy: Strategy
     film: Film
-    seconds: float
+    seconds: float  # on the comparison's clock
     nonfinite: int = 0
     budget: float | None = None
     measures: dict[str, float] = field(default_factory=dict)
+    clock: str = "wall"
+    wall_seconds: float | None = None  # both clocks, whichever the comparison uses
+    cpu_seconds: float | None = None
 
     @property
     def spp(self) -> int:
@@ -130,18 +174,22 @@ class Comparison:
     """Renders of one scene with shared Embree state, measured against one reference."""
 
     def __init__(self, scene: Scene, reference: Film, seed: int = 0, threads: int = 2,
-                 progress: bool = False):
+                 progress: bool = False, clock: str = "wall"):
         cam = scene.camera
         if (reference.width, reference.height) != (cam.width, cam.height):
             raise ValueError(f"reference is {reference.width}x{reference.height}, scene renders at "
                              f"{cam.width}x{cam.height}")
+        if clock not in CLOCKS:
+            raise ValueError(f"clock {clock!r}: expected one of {', '.join(CLOCKS)}")
         self.scene = scene
         self.reference = reference
         self.reference_variance = reference.variance_of_mean()
         self.seed = seed
         self.threads = threads
         self.progress = progress
+        self.clock = clock
         self.caster = RayCaster(scene.vertices, scene.faces)
+        self._warm: set[Strategy] = set()
 
     def _estimator(self, strategy: Strategy) -> DirectLighting:
         return DirectLighting(self.scene, strategy, self.caster)
@@ -150,11 +198,29 @@ class Comparison:
         if self.progress:
             print(text, file=sys.stderr)
 
+    def _warm_up(self, strategy: Strategy) -> None:
+        """Before the first CPU-timed render of a strategy: one sample of a 1x1 copy of the
+        scene, so that loading the compiled kernels (which ``render()`` keeps off its wall
+        clock, but which process CPU time would count) is not charged to the first run."""
+        if strategy in self._warm:
+            return
+        tiny = copy.copy(self.scene)
+        tiny.camera = dataclasses.replace(self.scene.camera, width=1, height=1)
+        render_complete(tiny, strategy, RenderSettings(spp=1, seed=self.seed, threads=1),
+                        estimator=DirectLighting(tiny, strategy, self.caster))
+        self._warm.add(strategy)
+
     def _render(self, strategy: Strategy, settings: RenderSettings, film: Film | None,
-                estimator: DirectLighting, progress: bool = False):
-        """One render; an interrupted one stops the comparison (module docstring)."""
-        return render_complete(self.scene, strategy, settings, film=film, estimator=estimator,
-                               progress=progress)
+                estimator: DirectLighting, progress: bool = False) -> tuple[RenderResult, float, float]:
+        """One render; an interrupted one stops the comparison (module docstring). Returns the
+        result, its seconds on the comparison's clock and its process CPU seconds (all threads)."""
+        if self.clock == "cpu":
+            self._warm_up(strategy)
+        start = time.process_time()
+        result = render_complete(self.scene, strategy, settings, film=film, estimator=estimator,
+                                 progress=progress)
+        cpu = time.process_time() - start
+        return result, (cpu if self.clock == "cpu" else result.seconds), cpu
 
     def _measure(self, run: Run) -> Run:
         run.measure(self.reference.mean, self.reference_variance)
@@ -167,15 +233,22 @@ class Comparison:
 
     def equal_spp(self, strategy: Strategy, spp: int) -> Run:
         """Render ``spp`` samples per pixel."""
-        result = self._render(strategy, RenderSettings(spp=spp, seed=self.seed, threads=self.threads),
-                              None, self._estimator(strategy), self.progress)
-        run = self._measure(Run(strategy, result.film, result.seconds, result.nonfinite))
-        self._say(f"  {strategy.label}: {run.spp} spp, {run.seconds:.2f} s, "
+        result, seconds, cpu = self._render(strategy, RenderSettings(spp=spp, seed=self.seed,
+                                                                     threads=self.threads),
+                                            None, self._estimator(strategy), self.progress)
+        run = self._measure(Run(strategy, result.film, seconds, result.nonfinite, clock=self.clock,
+                                wall_seconds=result.seconds, cpu_seconds=cpu))
+        self._say(f"  {strategy.label}: {run.spp} spp, {run.seconds:.2f} {self.unit}, "
                   f"relMSE {run.measures['relmse']:.4g}")
         return run
 
+    @property
+    def unit(self) -> str:
+        """How seconds on this comparison's clock are shown: ``s`` or ``CPU s``."""
+        return "CPU s" if self.clock == "cpu" else "s"
+
     def equal_time(self, strategy: Strategy, budget: float) -> Run:
-        """Render as many whole spp as fit in ``budget`` seconds.
+        """Render as many whole spp as fit in ``budget`` seconds of the comparison's clock.
 
         Passes are sized to about half of the time left, from the measured time per spp, and
         the render stops when less than half a pass of 1 spp remains; so the spent time ends
@@ -183,6 +256,7 @@ class Comparison:
         """
         estimator = self._estimator(strategy)
         film, spent, spp, nonfinite, per_spp = None, 0.0, 0, 0, None
+        wall, cpu = 0.0, 0.0
         while True:
             left = budget - spent
             if per_spp is None:
@@ -192,44 +266,66 @@ class Comparison:
                     break
                 chunk = max(1, int(0.5 * left / per_spp)) if left > 2 * per_spp else 1
             settings = RenderSettings(spp=chunk, seed=self.seed, threads=self.threads, first_sample=spp)
-            result = self._render(strategy, settings, film, estimator)
+            result, seconds, chunk_cpu = self._render(strategy, settings, film, estimator)
             film, spp = result.film, spp + chunk
-            spent += result.seconds
+            spent += seconds
+            wall += result.seconds
+            cpu += chunk_cpu
             nonfinite += result.nonfinite
             per_spp = spent / spp
-        run = self._measure(Run(strategy, film, spent, nonfinite, budget=budget))
-        self._say(f"  {strategy.label}: {run.spp} spp in {run.seconds:.2f} s of {budget:.2f} s, "
+        run = self._measure(Run(strategy, film, spent, nonfinite, budget=budget, clock=self.clock,
+                                wall_seconds=wall, cpu_seconds=cpu))
+        self._say(f"  {strategy.label}: {run.spp} spp in {run.seconds:.2f} {self.unit} of {budget:.2f}, "
                   f"relMSE {run.measures['relmse']:.4g}")
         return run
 
     def convergence(self, strategy: Strategy, max_spp: int | None = None,
-                    budget: float | None = None) -> list[dict[str, float]]:
-        """relMSE and cumulative seconds at spp 1, 2, 4, ... up to ``max_spp`` (or until the
-        time ``budget`` is spent). One progressive render: each point adds samples to the last."""
+                    budget: float | None = None, seed: int | None = None) -> list[dict[str, Any]]:
+        """relMSE and cumulative seconds (on the comparison's clock) at spp 1, 2, 4, ... up to
+        ``max_spp`` (or until the time ``budget`` is spent), for one ``seed`` (default: the
+        comparison's). One progressive render: each point adds samples to the last."""
+        seed = self.seed if seed is None else seed
         estimator = self._estimator(strategy)
-        points: list[dict[str, float]] = []
+        points: list[dict[str, Any]] = []
         film, spp, spent = None, 0, 0.0
         target = 1
         while (max_spp is None or target <= max_spp):
-            settings = RenderSettings(spp=target - spp, seed=self.seed, threads=self.threads,
-                                      first_sample=spp)
-            result = self._render(strategy, settings, film, estimator)
+            settings = RenderSettings(spp=target - spp, seed=seed, threads=self.threads, first_sample=spp)
+            result, seconds, _ = self._render(strategy, settings, film, estimator)
             film, spp = result.film, target
-            spent += result.seconds
+            spent += seconds
             rel = metrics.relmse(film.mean, self.reference.mean, self.reference_variance)
-            points.append({"strategy": strategy.name, "heuristic": strategy.recorded_heuristic, "spp": spp,
-                           "seconds": spent, "relmse": rel, "efficiency": metrics.efficiency(rel, spent)})
+            points.append({"strategy": strategy.name, "heuristic": strategy.recorded_heuristic, "seed": seed,
+                           "spp": spp, "seconds": spent, "relmse": rel,
+                           "efficiency": metrics.efficiency(rel, spent)})
             if budget is not None and spent * 2.0 > budget:  # the next doubling would overshoot
                 break
             target *= 2
-        self._say(f"  sweep {strategy.label}: {len(points)} points up to {spp} spp, {spent:.2f} s")
+        return points
+
+    def sweep(self, strategy: Strategy, seeds: list[int], max_spp: int | None = None,
+              budget: float | None = None) -> list[dict[str, Any]]:
+        """:meth:`convergence` once per seed, every seed up to the same spp: the first seed's
+        sweep decides it (``max_spp``, or as far as the ``budget`` goes), so that each point
+        has every seed and the mean over seeds is taken at the same spp."""
+        points = self.convergence(strategy, max_spp, budget, seeds[0])
+        last = points[-1]["spp"]
+        for seed in seeds[1:]:
+            points += self.convergence(strategy, last, None, seed)
+        spent = sum(p["seconds"] for p in points if p["spp"] == last)
+        self._say(f"  sweep {strategy.label}: {len(seeds)} seeds x {len(points) // len(seeds)} points up to "
+                  f"{last} spp, {spent:.2f} {self.unit}")
         return points
 
 
 def fit_convergence(points: list[dict[str, float]], x: str) -> tuple[float, float]:
-    """Least-squares line through (log x, log relMSE) over the points with spp >= 4 (earlier
-    ones carry start-up noise): returns (slope, intercept). Monte Carlo's rate is slope -1."""
-    use = [p for p in points if p["spp"] >= 4 and p["relmse"] > 0.0] or [p for p in points if p["relmse"] > 0]
+    """Least-squares line through (log x, log relMSE) over the points with spp >= FIT_MIN_SPP
+    (earlier ones carry start-up noise; all points if fewer than two are left): returns
+    (slope, intercept). Monte Carlo's rate is slope -1. Points whose (corrected) relMSE is not
+    positive are below the reference's resolution and left out."""
+    use = [p for p in points if p["spp"] >= FIT_MIN_SPP and p["relmse"] > 0.0]
+    if len(use) < 2:
+        use = [p for p in points if p["relmse"] > 0.0]
     if len(use) < 2:
         return float("nan"), float("nan")
     lx = np.log([p[x] for p in use])
@@ -239,21 +335,209 @@ def fit_convergence(points: list[dict[str, float]], x: str) -> tuple[float, floa
 
 
 def time_to_reach(points: list[dict[str, float]], target: float) -> tuple[float, bool]:
-    """Seconds to reach relMSE <= target: interpolated (log-log) between measured points, else
-    extrapolated along the fitted line. Returns (seconds, extrapolated). Points whose
-    (corrected) relMSE is not positive are below the reference's resolution and left out."""
-    points = [p for p in points if p["relmse"] > 0.0]
+    """Seconds to reach relMSE <= target on one curve: the first point's seconds if it is
+    already there, else interpolated (log-log) at the first crossing, else extrapolated: the
+    spp at which the line fitted against spp reaches the target, costed at the last doubling's
+    seconds per spp (render time grows linearly in spp; the early points also carry fixed costs
+    per render, which would steepen a line fitted against seconds), inf if the line does not
+    fall. Returns (seconds, extrapolated). A relMSE that is not positive (below what the
+    reference resolves) has reached any target, but cannot be interpolated or fitted in logs."""
+    if points and points[0]["relmse"] <= target:
+        return points[0]["seconds"], False
     for before, after in zip(points, points[1:], strict=False):
         if before["relmse"] > target >= after["relmse"]:
+            if after["relmse"] <= 0.0:
+                return after["seconds"], False
             t = np.interp(np.log(target), [np.log(after["relmse"]), np.log(before["relmse"])],
                           [np.log(after["seconds"]), np.log(before["seconds"])])
             return float(np.exp(t)), False
-    if points and points[0]["relmse"] <= target:
-        return points[0]["seconds"], False
-    slope, intercept = fit_convergence(points, "seconds")
+    points = [p for p in points if p["relmse"] > 0.0]
+    if len(points) < 2:
+        return float("inf"), True
+    slope, intercept = fit_convergence(points, "spp")
     if not np.isfinite(slope) or slope >= 0.0:
         return float("inf"), True
-    return float(np.exp((np.log(target) - intercept) / slope)), True
+    log_spp = (np.log(target) - intercept) / slope
+    if log_spp > np.log(MAX_SAMPLE_INDEX):  # more samples than a film can count
+        return float("inf"), True
+    spp = np.exp(log_spp)
+    last, before = points[-1], points[-2]
+    per_spp = (last["seconds"] - before["seconds"]) / (last["spp"] - before["spp"])
+    return float(last["seconds"] + (spp - last["spp"]) * per_spp), True
+
+
+# ---------------------------------------------------------------------------------------------
+# Sweeps over several seeds: mean curves, slopes and times with confidence intervals
+
+
+@dataclass
+class SweepCurve:
+    """One strategy's sweep over seeds as arrays: ``relmse (S, K)`` and cumulative ``seconds
+    (S, K)`` of S seeds at the K spp of ``spp (K,)`` that every seed reached."""
+
+    strategy: str
+    seeds: list[int]
+    spp: np.ndarray
+    seconds: np.ndarray
+    relmse: np.ndarray
+
+    def mean_points(self, keep: np.ndarray | None = None) -> list[dict[str, float]]:
+        """The curve of the means over the seeds (those of ``keep (S,) bool``, default all):
+        dicts with spp, seconds and relmse, as :func:`fit_convergence` takes them."""
+        rows = np.ones(len(self.seeds), dtype=bool) if keep is None else keep
+        seconds, relmse = self.seconds[rows].mean(axis=0), self.relmse[rows].mean(axis=0)
+        return [{"spp": int(n), "seconds": float(t), "relmse": float(r)}
+                for n, t, r in zip(self.spp, seconds, relmse, strict=True)]
+
+    def summary(self) -> list[dict[str, float]]:
+        """Per spp: the mean seconds and relMSE over the seeds, the standard error of the mean
+        relMSE (NaN for one seed), and the smallest and largest single-seed relMSE."""
+        count = len(self.seeds)
+        rel = self.relmse
+        se = rel.std(axis=0, ddof=1) / np.sqrt(count) if count > 1 else np.full(len(self.spp), np.nan)
+        columns = zip(self.spp, self.seconds.mean(axis=0), rel.mean(axis=0), se, rel.min(axis=0),
+                      rel.max(axis=0), strict=True)
+        return [{"strategy": self.strategy, "spp": int(n), "seeds": count, "seconds": float(t),
+                 "relmse": float(r), "relmse_se": float(e), "relmse_min": float(lo), "relmse_max": float(hi)}
+                for n, t, r, e, lo, hi in columns]
+
+
+def sweep_curves(points: list[dict[str, Any]]) -> dict[str, SweepCurve]:
+    """The sweep's points (``Comparison.sweep``'s dicts, any strategies and seeds) as one
+    :class:`SweepCurve` per strategy, in order of first appearance. Points without a seed
+    count as one seed."""
+    curves = {}
+    for name in dict.fromkeys(p["strategy"] for p in points):
+        mine = [p for p in points if p["strategy"] == name]
+        seeds = list(dict.fromkeys(p.get("seed") for p in mine))
+        by_seed = [{p["spp"]: p for p in mine if p.get("seed") == seed} for seed in seeds]
+        spp = sorted(set.intersection(*(set(b) for b in by_seed)))
+
+        def table(key: str, by_seed=by_seed, spp=spp) -> np.ndarray:
+            values = [[b[n][key] for n in spp] for b in by_seed]
+            return np.array(values, dtype=np.float64).reshape(len(by_seed), -1)
+
+        curves[name] = SweepCurve(name, seeds, np.array(spp, dtype=np.int64), table("seconds"),
+                                  table("relmse"))
+    return curves
+
+
+def t_quantile(confidence: float, dof: int) -> float:
+    """The two-sided Student t critical value for ``confidence`` and ``dof`` degrees of freedom."""
+    from scipy import stats
+
+    return float(stats.t.ppf(0.5 + confidence / 2.0, dof))
+
+
+def jackknife(curve: SweepCurve, statistic: Callable[[list[dict[str, float]]], float]) -> tuple[float, float]:
+    """``statistic`` of the mean curve over all seeds, and its jackknife standard error over the
+    seeds: sqrt((S-1)/S sum_i (theta_(i) - mean theta_(.))^2), theta_(i) the statistic with seed i
+    left out. The seeds are the independent units (a seed's points share samples). NaN for
+    fewer than 2 seeds; inf if a leave-one-out value is not finite."""
+    value = statistic(curve.mean_points())
+    count = len(curve.seeds)
+    if count < 2:
+        return value, float("nan")
+    left_out = []
+    for i in range(count):
+        keep = np.ones(count, dtype=bool)
+        keep[i] = False
+        left_out.append(statistic(curve.mean_points(keep)))
+    replicates = np.array(left_out)
+    if not np.all(np.isfinite(replicates)):
+        return value, float("inf")
+    return value, float(np.sqrt((count - 1) / count * np.sum((replicates - replicates.mean()) ** 2)))
+
+
+@dataclass
+class SlopeFit:
+    """A fitted convergence slope with its confidence interval (NaN bounds for one seed)."""
+
+    slope: float
+    intercept: float
+    low: float
+    high: float
+    seeds: int
+
+    def excludes(self, value: float) -> bool:
+        """Whether the interval is defined and ``value`` lies outside it."""
+        return bool(np.isfinite(self.low) and np.isfinite(self.high) and not self.low <= value <= self.high)
+
+
+def fit_sweep(curve: SweepCurve, x: str, confidence: float = CONFIDENCE) -> SlopeFit:
+    """The slope of log mean relMSE against log ``x`` (``spp`` or ``seconds``) by
+    :func:`fit_convergence`, with a ``confidence`` interval slope +- t se from the jackknife
+    over the seeds and Student's t with S - 1 degrees of freedom."""
+    slope, intercept = fit_convergence(curve.mean_points(), x)
+    _, se = jackknife(curve, lambda points: fit_convergence(points, x)[0])
+    count = len(curve.seeds)
+    if count < 2 or not np.isfinite(slope):
+        return SlopeFit(slope, intercept, float("nan"), float("nan"), count)
+    half = t_quantile(confidence, count - 1) * se
+    return SlopeFit(slope, intercept, slope - half, slope + half, count)
+
+
+def time_to_target(curve: SweepCurve, target: float, confidence: float = CONFIDENCE,
+                   limit: float = EXTRAPOLATION_LIMIT) -> dict[str, Any]:
+    """Seconds for the mean curve to reach relMSE ``target`` (:func:`time_to_reach`), with a
+    ``confidence`` interval from the jackknife over seeds of its logarithm; reported only where
+    the data support it. ``how`` says which: ``at most`` (reached at the first point),
+    ``interpolated`` (between two measured points) or ``extrapolated`` along the line fitted
+    against spp, which needs at least 2 seeds, a slope whose interval lies below 0 and a time
+    at most ``limit`` times the sweep's longest. Otherwise ``seconds`` is None and ``note``
+    says why."""
+    points = curve.mean_points()
+    row: dict[str, Any] = {"strategy": curve.strategy, "target_relmse": target, "seeds": len(curve.seeds),
+                           "seconds": None, "low": None, "high": None, "how": None, "note": "",
+                           "confidence": confidence}
+    seconds, extrapolated = time_to_reach(points, target)
+    longest = points[-1]["seconds"]
+    if extrapolated:
+        fit = fit_sweep(curve, "spp", confidence)
+        if len(curve.seeds) < 2:
+            row["note"] = "not reached, and one seed gives no interval to extrapolate with"
+            return row
+        if not np.isfinite(fit.slope):
+            row["note"] = "not reached, and too few points to fit a slope"
+            return row
+        if not fit.high < 0.0:
+            row["note"] = (f"not reached, and the slope ({fit.slope:.2f}, interval "
+                           f"{fit.low:.2f} .. {fit.high:.2f}) does not exclude 0")
+            return row
+        if not seconds <= limit * longest:
+            row["note"] = (f"not reached; the fitted line reaches it beyond {limit:g}x the sweep's "
+                           f"longest time ({longest:.3g} s)")
+            return row
+        row["how"] = "extrapolated"
+    else:
+        row["how"] = "at most" if points[0]["relmse"] <= target else "interpolated"
+    log_t, se = jackknife(curve, lambda pts: float(np.log(time_to_reach(pts, target)[0])))
+    row["seconds"] = seconds
+    if np.isfinite(se):
+        half = t_quantile(confidence, len(curve.seeds) - 1) * se
+        row["low"], row["high"] = float(np.exp(log_t - half)), float(np.exp(log_t + half))
+    elif se == float("inf"):
+        row["low"], row["high"] = 0.0, float("inf")
+    return row
+
+
+def convergence_rows(points: list[dict[str, Any]], target: float,
+                     confidence: float = CONFIDENCE) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """For ``metrics.json`` and the tables: one row of fitted slopes per strategy (against spp
+    and seconds, each with its interval, and whether the spp interval holds Monte Carlo's -1)
+    and one row of time to ``target`` (:func:`time_to_target`)."""
+    slopes, times = [], []
+    for name, curve in sweep_curves(points).items():
+        row: dict[str, Any] = {"strategy": name, "seeds": len(curve.seeds), "confidence": confidence,
+                               "first_spp_fitted": FIT_MIN_SPP}
+        for x in ("spp", "seconds"):
+            fit = fit_sweep(curve, x, confidence)
+            row.update({f"slope_{x}": fit.slope, f"slope_{x}_low": fit.low, f"slope_{x}_high": fit.high})
+        low, high = row["slope_spp_low"], row["slope_spp_high"]
+        row["holds_minus_one"] = bool(low <= -1.0 <= high) if np.isfinite(low) and np.isfinite(high) else None
+        slopes.append(row)
+        times.append(time_to_target(curve, target, confidence))
+    return slopes, times
 
 
 def run_row(run: Run) -> dict[str, object]:
@@ -261,7 +545,8 @@ def run_row(run: Run) -> dict[str, object]:
     row: dict[str, object] = {"strategy": run.strategy.name, "heuristic": run.strategy.recorded_heuristic,
                               "light_samples": run.strategy.light_count,
                               "bsdf_samples": run.strategy.direction_count,
-                              "spp": run.spp, "seconds": run.seconds}
+                              "spp": run.spp, "seconds": run.seconds, "clock": run.clock,
+                              "wall_seconds": run.wall_seconds, "cpu_seconds": run.cpu_seconds}
     row.update(run.measures)
     if run.budget is not None:
         row["budget"] = run.budget

@@ -444,6 +444,13 @@ def rejection(rng: np.random.Generator, out_dir: Path | None = None, n: int = 10
 
 
 def _rejection_figure(rng: np.random.Generator, result: Result, out_dir: Path) -> Path:
+    return _finish_figure(_pyplot(), rejection_figure(rng, result), out_dir, "primer_2_rejection")
+
+
+def rejection_figure(rng: np.random.Generator, result: Result):
+    """The rejection exercise's figure (a matplotlib Figure, laid out, not saved): the point
+    sets with their circles on equal-aspect axes (one unit is as long in x as in y, so the
+    circles are drawn round), the spread of the estimates, and the acceptance rate against d."""
     plt = _pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(11, 9))
     shown = 1500
@@ -459,7 +466,7 @@ def _rejection_figure(rng: np.random.Generator, result: Result, out_dir: Path) -
         ax.scatter(*pts[~inside].T, s=3, color="#ff7f0e", label="outside: rejected")
         ax.add_patch(plt.Circle(circle[0], circle[1], fill=False, color="k", lw=1.2))
         ax.plot(*outline.T, color="k", lw=1.2)
-        ax.set_aspect("equal")
+        ax.set_aspect("equal", adjustable="box")  # the axes box takes the data's shape
         ax.set_title(f"{label}: here {c:.4g} × {inside.sum()}/{shown} = {c * inside.mean():.4f}", fontsize=10)
         ax.set_xlabel("x")
         ax.set_ylabel("y")
@@ -502,7 +509,8 @@ def _rejection_figure(rng: np.random.Generator, result: Result, out_dir: Path) -
     ax.set_xticks(fine[::2] if len(fine) > 12 else fine)
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(fontsize=8)
-    return _finish_figure(plt, fig, out_dir, "primer_2_rejection")
+    fig.tight_layout()
+    return fig
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,7 +1,9 @@
 """Comparison reports: images, error maps, the labelled grid, charts, tables and index.html.
 
 Everything goes into one folder with relative links only, so the folder can be zipped, put on
-a web page or opened from disk. Maps and charts are drawn with matplotlib (Agg: no display).
+a web page or opened from disk. Maps and charts are drawn with matplotlib (Agg: no display) and
+written as PNG at print resolution (``PRINT_DPI``), which the page shows, and, on request, also
+as PDF and SVG (vector: text and lines stay sharp at any size; the maps' pixels are embedded).
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ import csv
 import html
 import io
 import json
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -19,11 +22,28 @@ from ..atomic import save_figure, write_text
 from ..film import Film
 from ..imagefiles import to_srgb8, write_exr, write_png
 from . import metrics
-from .compare import Run, fit_convergence, run_row, time_to_reach
+from .compare import (
+    CONFIDENCE,
+    EXTRAPOLATION_LIMIT,
+    FIT_MIN_SPP,
+    Run,
+    convergence_rows,
+    run_row,
+    sweep_curves,
+)
 
 RELERR_RANGE = (-5.0, 1.0)  # log10 of per-pixel relative squared error shown in the maps
 RATIO_RANGE = 4.0  # log2 efficiency ratio shown from -4 to 4 (16x either way)
 COLORS = {"uniform": "#8c8c8c", "cosine": "#b07aa1", "bsdf": "#4e79a7", "light": "#f28e2b", "mis": "#59a14f"}
+# Every matplotlib figure is a PNG (the page shows it) and, as asked, a PDF and an SVG too.
+FIGURE_FORMATS = ("png", "pdf", "svg")
+PRINT_DPI = 300  # PNG figures at print resolution (a 5.5 inch chart is 1650 pixels wide)
+# Why heavy-tailed estimators look slower than 1/spp in a sweep: said on the chart and the page.
+HEAVY_TAIL_NOTE = (
+    "An interval that excludes -1 (†) is the mark of a heavy-tailed estimator: its relMSE is dominated by "
+    "rare, very large samples (a small light found by chance). Its expected relMSE still falls exactly as "
+    "1/spp, but runs of few samples seldom draw those samples, so their measured error sits below the "
+    "expectation and the curve falls slower until spp is large enough that every run draws its share.")
 
 
 def _pyplot():
@@ -48,39 +68,55 @@ def run_name(run: Run) -> str:
 # Per-strategy maps
 
 
+def save_figures(fig, path: Path, formats: tuple[str, ...] = ("png",)) -> list[str]:
+    """Write ``fig`` as ``path`` (a .png, at PRINT_DPI) and beside it in each other format of
+    ``formats`` (``FIGURE_FORMATS``); close it. Returns the file names written, PNG first."""
+    plt = _pyplot()
+    names = []
+    for fmt in dict.fromkeys(("png", *formats)):
+        target = path.with_suffix(f".{fmt}")
+        save_figure(fig, target, dpi=PRINT_DPI)
+        names.append(target.name)
+    plt.close(fig)
+    return names
+
+
 def save_map(values: np.ndarray, path: Path, title: str, label: str, cmap: str = "magma",
-             vmin: float | None = None, vmax: float | None = None) -> None:
-    """A false-colour map of ``values (H, W)`` with a title and a labelled colour bar."""
+             vmin: float | None = None, vmax: float | None = None,
+             formats: tuple[str, ...] = ("png",)) -> list[str]:
+    """A false-colour map of ``values (H, W)`` with a title and a labelled colour bar; returns
+    the files written (:func:`save_figures`)."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(4.6, 3.8))
-    im = ax.imshow(values, cmap=cmap, vmin=vmin, vmax=vmax)
+    im = ax.imshow(values, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
     ax.set_title(title, fontsize=9)
     ax.axis("off")
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label=label)
     fig.tight_layout()
-    save_figure(fig, path)
-    plt.close(fig)
+    return save_figures(fig, path, formats)
 
 
-def relerr_map(run: Run, reference: Film, path: Path) -> None:
+def relerr_map(run: Run, reference: Film, path: Path, formats: tuple[str, ...] = ("png",)) -> list[str]:
     """False-colour map of log10 relative squared error (channel mean), fixed range for all."""
     rel = metrics.relative_squared_error(run.film.image(), reference.image()).mean(axis=2)
-    save_map(np.log10(rel + 1e-12), path, f"{run_name(run)}: relative squared error",
-             "log10 (I-R)² / (R²+0.01)", vmin=RELERR_RANGE[0], vmax=RELERR_RANGE[1])
+    return save_map(np.log10(rel + 1e-12), path, f"{run_name(run)}: relative squared error",
+                    "log10 (I-R)² / (R²+0.01)", vmin=RELERR_RANGE[0], vmax=RELERR_RANGE[1], formats=formats)
 
 
-def flip_map(run: Run, reference: Film, path: Path) -> float:
+def flip_map(run: Run, reference: Film, path: Path, formats: tuple[str, ...] = ("png",)) -> float:
     """The HDR-FLIP perceptual error map (OpenImageIO's built-in); returns the mean FLIP."""
     import OpenImageIO as oiio
 
     ref_buf = oiio.ImageBuf(np.ascontiguousarray(reference.image(), dtype=np.float32))
     test_buf = oiio.ImageBuf(np.ascontiguousarray(run.film.image(), dtype=np.float32))
     flip = oiio.ImageBufAlgo.FLIP_diff(ref_buf, test_buf).get_pixels(oiio.FLOAT)[..., 0]
-    save_map(flip, path, f"{run_name(run)}: FLIP (mean {flip.mean():.3f})", "FLIP error", vmin=0.0, vmax=1.0)
+    save_map(flip, path, f"{run_name(run)}: FLIP (mean {flip.mean():.3f})", "FLIP error", vmin=0.0, vmax=1.0,
+             formats=formats)
     return float(flip.mean())
 
 
-def ratio_map(a: Run, b: Run, reference: Film, path: Path) -> dict[str, float]:
+def ratio_map(a: Run, b: Run, reference: Film, path: Path,
+              formats: tuple[str, ...] = ("png",)) -> dict[str, float]:
     """Per-pixel log2 efficiency ratio of a over b; returns the share of pixels each wins."""
     ref = reference.image()
     err_a = (a.film.image() - ref) ** 2
@@ -88,7 +124,7 @@ def ratio_map(a: Run, b: Run, reference: Film, path: Path) -> dict[str, float]:
     ratio = metrics.efficiency_ratio_map(err_a, a.seconds, err_b, b.seconds)
     save_map(ratio, path, f"efficiency: {run_name(a)} (blue) vs {run_name(b)} (red)",
              f"log2 efficiency({run_name(a)}) / efficiency({run_name(b)})", cmap="RdBu",
-             vmin=-RATIO_RANGE, vmax=RATIO_RANGE)
+             vmin=-RATIO_RANGE, vmax=RATIO_RANGE, formats=formats)
     lit = ratio != 0.0
     return {"a_wins": float(np.mean(ratio[lit] > 0.0)) if lit.any() else 0.0,
             "b_wins": float(np.mean(ratio[lit] < 0.0)) if lit.any() else 0.0}
@@ -119,15 +155,20 @@ def pick_insets(runs: list[Run], reference: Film, count: int = 2) -> list[tuple[
     return windows
 
 
-def _label(tile: np.ndarray, lines: list[str]) -> np.ndarray:
-    """Write lines of text on a dark band at the top of an RGB float tile in [0, 1]."""
+def _text_size(width: int) -> int:
+    """Label text height in pixels for tiles ``width`` pixels wide."""
+    return max(10, min(14, width // 18))
+
+
+def label_band(width: int, lines: list[str], rows: int) -> np.ndarray:
+    """A dark band ``(h, width, 3)`` in [0, 1] with ``lines`` of text, tall enough for
+    ``rows`` lines: it sits above its tile, so it hides none of the image (the reference's
+    inset outlines included)."""
     import OpenImageIO as oiio
 
-    size = max(10, min(14, tile.shape[1] // 18))
-    band = (len(lines) * (size + 3) + 4)
-    tile = tile.copy()
-    tile[:band] *= 0.35
-    buf = oiio.ImageBuf(np.ascontiguousarray(tile, dtype=np.float32))
+    size = _text_size(width)
+    band = np.full((rows * (size + 3) + 4, width, 3), 0.12, dtype=np.float32)
+    buf = oiio.ImageBuf(band)
     for i, text in enumerate(lines):
         oiio.ImageBufAlgo.render_text(buf, 4, (i + 1) * (size + 3), text, size, "", (1.0, 0.95, 0.5))
     return buf.get_pixels(oiio.FLOAT)
@@ -143,20 +184,26 @@ def _outline(tile: np.ndarray, window: tuple[int, int, int, int], color=(1.0, 0.
 
 
 def grid_image(runs: list[Run], reference: Film, windows: list[tuple[int, int, int, int]],
-               exposure: float, path: Path) -> None:
-    """Reference and each run side by side, labelled, with zoomed insets below each tile."""
-    tiles = []
+               exposure: float, path: Path) -> int:
+    """Reference and each run side by side, each under a band of labels and above zoomed insets,
+    the insets' windows outlined in red on the reference. Returns the band's height in pixels
+    (the image of each column starts that far down)."""
     columns = [("reference", reference, [f"reference {reference.spp} spp"])] + [
-        (run_name(r), r.film, [run_name(r), f"{r.spp} spp  {r.seconds:.2f} s",
+        (run_name(r), r.film, [run_name(r), f"{r.spp} spp  {r.seconds:.2f} {_unit(r.clock)}",
                                f"relMSE {r.measures['relmse']:.3g}"]) for r in runs]
     width = reference.width
+    rows = max(len(lines) for _, _, lines in columns)
+    tiles = []
+    band_height = 0
     for name, film, lines in columns:
         image = to_srgb8(film.image(), exposure).astype(np.float32) / 255.0
         main = image.copy()
         if name == "reference":
             for window in windows:
                 _outline(main, window)
-        parts = [_label(main, lines)]
+        band = label_band(width, lines, rows)
+        band_height = band.shape[0]
+        parts = [band, main]
         for x, y, w, h in windows:
             crop = image[y:y + h, x:x + w]
             zoom = max(1, width // w)
@@ -168,55 +215,136 @@ def grid_image(runs: list[Run], reference: Film, windows: list[tuple[int, int, i
         tiles.append(np.concatenate(parts, axis=0))
         tiles.append(np.ones((tiles[-1].shape[0], 3, 3), dtype=np.float32))
     write_png(path, np.concatenate(tiles[:-1], axis=1), srgb=True)
+    return band_height
+
+
+def _unit(clock: str) -> str:
+    """How seconds on ``clock`` are shown: ``s`` (wall) or ``CPU s``."""
+    return "CPU s" if clock == "cpu" else "s"
 
 
 # ---------------------------------------------------------------------------------------------
 # Charts
 
 
-def convergence_chart(sweep: list[dict[str, Any]], target: float, path: Path) -> None:
-    """relMSE against seconds and against spp, log-log, with fitted slopes in the legend.
+def _interval(value: Any, low: Any, high: Any, spec: str) -> str:
+    """``value [low, high]`` with ``spec``, the bounds left out where they are undefined."""
+    if value is None or not np.isfinite(value):
+        return "n/a"
+    text = format(value, spec)
+    if low is None or high is None or not (np.isfinite(low) and np.isfinite(high)):
+        return text
+    return f"{text} [{format(low, spec)}, {format(high, spec)}]"
+
+
+def slope_text(row: dict[str, Any], ascii_only: bool = False) -> str:
+    """A strategy's slope against spp with its interval, marked † (``*`` in ASCII) where that
+    excludes -1."""
+    mark = " *" if ascii_only else " †"
+    return (_interval(row["slope_spp"], row["slope_spp_low"], row["slope_spp_high"], ".2f")
+            + (mark if row["holds_minus_one"] is False else ""))
+
+
+def time_text(row: dict[str, Any], unit: str = "s", ascii_only: bool = False) -> str:
+    """A time to target with its interval and how it was found (``n/a`` where there is none)."""
+    if row["seconds"] is None:
+        return "n/a"
+    prefix = ("<= " if ascii_only else "≤ ") if row["how"] == "at most" else ""
+    low, high = row["low"], row["high"]
+    text = f"{prefix}{row['seconds']:.3g} {unit}"
+    if low is not None and high is not None:
+        infinite = "inf" if ascii_only else "∞"
+        text += f" [{low:.3g}, {infinite if not np.isfinite(high) else format(high, '.3g')}]"
+    return text + (" (extrapolated)" if row["how"] == "extrapolated" else "")
+
+
+def convergence_chart(sweep: list[dict[str, Any]], target: float, path: Path,
+                      slopes: list[dict[str, Any]], times: list[dict[str, Any]], clock: str = "wall",
+                      formats: tuple[str, ...] = ("png",)) -> list[str]:
+    """relMSE against seconds and against spp, log-log: per strategy the mean over the sweep's
+    seeds (bars: +-1 standard error of the mean; band: the range of the single seeds), its
+    fitted slope with its interval in the legend, a dotted slope -1 through the last mean point,
+    and the time to the target relMSE (diamond, with its interval) where the data support one.
     Points whose corrected relMSE is not positive (below the reference's noise, or an exactly
-    black image) cannot sit on a log axis and are left out."""
+    black image) cannot sit on a log axis and are left out. Returns the files written."""
     plt = _pyplot()
-    fig, (ax_t, ax_s) = plt.subplots(1, 2, figsize=(11, 4.3))
-    for name in dict.fromkeys(p["strategy"] for p in sweep):
-        pts = [p for p in sweep if p["strategy"] == name and p["relmse"] > 0.0]
+    fig, (ax_t, ax_s) = plt.subplots(1, 2, figsize=(11, 5.2))
+    slope_of = {r["strategy"]: r for r in slopes}
+    time_of = {r["strategy"]: r for r in times}
+    seeds = 1
+    plotted = False
+    for name, curve in sweep_curves(sweep).items():
         color = COLORS.get(name)
-        slope_t, _ = fit_convergence(pts, "seconds")
-        slope_s, _ = fit_convergence(pts, "spp")
-        ax_t.loglog([p["seconds"] for p in pts], [p["relmse"] for p in pts], "o-", color=color,
-                    label=f"{name} (slope {slope_t:.2f})", ms=3)
-        ax_s.loglog([p["spp"] for p in pts], [p["relmse"] for p in pts], "o-", color=color,
-                    label=f"{name} (slope {slope_s:.2f})", ms=3)
-    for ax, xlabel in ((ax_t, "seconds"), (ax_s, "samples per pixel")):
+        seeds = max(seeds, len(curve.seeds))
+        t = time_of[name]
+        ax_s.plot([], [], "o-", ms=3, color=color, label=f"{name}: {slope_text(slope_of[name])}")
+        ax_t.plot([], [], "o-", ms=3, color=color, label=f"{name}: {time_text(t, _unit(clock))}")
+        rows = [r for r in curve.summary() if r["relmse"] > 0.0]
+        if not rows:
+            continue
+        plotted = True
+        mean = np.array([r["relmse"] for r in rows])
+        se = np.nan_to_num(np.array([r["relmse_se"] for r in rows]))
+        low = np.array([r["relmse_min"] for r in rows])
+        high = np.array([r["relmse_max"] for r in rows])
+        spp = np.array([r["spp"] for r in rows], dtype=float)
+        seconds = np.array([r["seconds"] for r in rows])
+        below = np.minimum(se, mean * (1.0 - 1e-6))  # a bar cannot reach 0 on a log axis
+        for ax, x in ((ax_t, seconds), (ax_s, spp)):
+            if len(curve.seeds) > 1:
+                ax.fill_between(x, np.where(low > 0.0, low, np.nan), high, color=color, alpha=0.13, lw=0)
+            ax.errorbar(x, mean, yerr=(below, se), fmt="o-", ms=3, lw=1.2, capsize=2, color=color)
+        ax_s.plot(spp, mean[-1] * spp[-1] / spp, ":", color=color, lw=1.0)
+        if t["seconds"] is not None:
+            err = None
+            if t["low"] is not None and t["high"] is not None and np.isfinite(t["high"]):
+                err = [[t["seconds"] - t["low"]], [t["high"] - t["seconds"]]]
+            ax_t.errorbar([t["seconds"]], [target], xerr=err, fmt="D", ms=6, mec="k", mew=0.6,
+                          color=color, capsize=3, zorder=5)
+    seconds_label = "CPU seconds (all threads)" if clock == "cpu" else "seconds (wall clock)"
+    for ax, xlabel in ((ax_t, seconds_label), (ax_s, "samples per pixel")):
         ax.axhline(target, color="k", lw=0.7, ls="--")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        if plotted:
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+        else:
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.text(0.5, 0.5, "no positive relMSE to show\n(below what the reference resolves)",
+                    ha="center", va="center", transform=ax.transAxes, fontsize=9)
         ax.set_xlabel(xlabel)
-        ax.set_ylabel("relMSE")
+        ax.set_ylabel(f"relMSE (mean of {seeds} seeds)" if seeds > 1 else "relMSE")
         ax.grid(True, which="both", lw=0.3, alpha=0.5)
-        ax.legend(fontsize=8)
-    ax_t.set_title(f"error against time (dashed: target relMSE {target:g})", fontsize=10)
-    ax_s.set_title("error against samples (Monte Carlo: slope -1)", fontsize=10)
-    fig.tight_layout()
-    save_figure(fig, path)
-    plt.close(fig)
+    level = f"{CONFIDENCE:.0%}"
+    ax_t.legend(fontsize=7.5, title=f"time to relMSE {target:g} [{level} interval]", title_fontsize=8)
+    ax_s.legend(fontsize=7.5, title=f"slope for spp ≥ {FIT_MIN_SPP} [{level} interval]", title_fontsize=8)
+    ax_t.set_title(f"error against time (dashed: target relMSE {target:g}; ◆: time to reach it)", fontsize=10)
+    ax_s.set_title("error against samples (dotted: slope -1, the expected 1/spp)", fontsize=10)
+    caption = (f"Each point: the mean over {seeds} independent seeds; bars ±1 standard error, band: the "
+               "range of single seeds. Intervals: jackknife over the seeds." if seeds > 1 else
+               "One seed per point: no spread or intervals (use more sweep seeds).")
+    if any(r["holds_minus_one"] is False for r in slopes):
+        caption += " " + HEAVY_TAIL_NOTE
+    lines = textwrap.wrap(caption, 175)
+    fig.text(0.01, 0.01, "\n".join(lines), fontsize=7.5, va="bottom", ha="left")
+    # Room for the caption: its lines of 7.5 points (1.2 line spacing) as a share of the height.
+    fig.tight_layout(rect=(0.0, 0.01 + len(lines) * 7.5 * 1.2 / 72.0 / fig.get_figheight(), 1.0, 1.0))
+    return save_figures(fig, path, formats)
 
 
-def allocation_chart(rows: list[dict[str, Any]], path: Path) -> None:
-    """Efficiency of MIS for each light:BSDF sample allocation."""
+def allocation_chart(rows: list[dict[str, Any]], path: Path, clock: str = "wall",
+                     formats: tuple[str, ...] = ("png",)) -> list[str]:
+    """Efficiency of MIS for each light:BSDF sample allocation; returns the files written."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 3.6))
     labels = [f"{r['light_samples']}:{r['bsdf_samples']}" for r in rows]
     ax.bar(labels, [r["efficiency"] for r in rows], color="#59a14f")
     ax.set_xlabel("light : BSDF samples per camera sample")
-    ax.set_ylabel("efficiency = 1 / (relMSE × seconds)")
+    ax.set_ylabel("efficiency = 1 / (relMSE × " + ("CPU seconds)" if clock == "cpu" else "seconds)"))
     ax.set_yscale("log")
     ax.set_title("MIS sample allocation", fontsize=10)
     fig.tight_layout()
-    save_figure(fig, path)
-    plt.close(fig)
+    return save_figures(fig, path, formats)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -249,8 +377,9 @@ def write_tables(out: Path, document: dict[str, Any]) -> None:
     metrics.csv (the results table; undefined numbers are empty cells)."""
     safe = json_safe(document)
     write_text(out / "metrics.json", json.dumps(safe, indent=2, allow_nan=False) + "\n")
-    columns = ["strategy", "heuristic", "light_samples", "bsdf_samples", "spp", "seconds", "budget",
-               "mse", "relmse", "variance", "efficiency", "flip", "mse_uncorrected", "relmse_uncorrected"]
+    columns = ["strategy", "heuristic", "light_samples", "bsdf_samples", "spp", "seconds", "budget", "clock",
+               "wall_seconds", "cpu_seconds", "mse", "relmse", "variance", "efficiency", "flip",
+               "mse_uncorrected", "relmse_uncorrected"]
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=columns, extrasaction="ignore")
     writer.writeheader()
@@ -258,9 +387,52 @@ def write_tables(out: Path, document: dict[str, Any]) -> None:
     write_text(out / "metrics.csv", table.getvalue())
 
 
-def write_index(out: Path, document: dict[str, Any], images: dict[str, list[str]]) -> None:
-    """A static page with the grid, maps, charts and table; relative links only."""
+def _convergence_html(document: dict[str, Any]) -> str:
+    """The sweep's table (slopes and times to target, with intervals) and what it means."""
     esc = html.escape
+    slopes, times = document.get("convergence", []), document.get("time_to_target", [])
+    if not slopes:
+        return ""
+    unit = _unit(document["mode"].get("clock", "wall"))
+    target = times[0]["target_relmse"] if times else float("nan")
+    level = f"{slopes[0]['confidence']:.0%}"
+    rows = []
+    for slope, time in zip(slopes, times, strict=True):
+        why = f' title="{esc(time["note"])}"' if time["note"] else ""
+        note = f"<br><small>{esc(time['note'])}</small>" if time["note"] else ""
+        against_time = _interval(slope["slope_seconds"], slope["slope_seconds_low"],
+                                 slope["slope_seconds_high"], ".2f")
+        rows.append(f"<tr><td>{esc(slope['strategy'])}</td><td>{slope['seeds']}</td>"
+                    f"<td>{esc(slope_text(slope))}</td><td>{esc(against_time)}</td>"
+                    f"<td{why}>{esc(time_text(time, unit))}{note}</td></tr>")
+    flagged = any(r["holds_minus_one"] is False for r in slopes)
+    caveat = (f" {esc(HEAVY_TAIL_NOTE)} The intervals come from the spread between the seeds, so they "
+              "cannot account for large samples that no seed drew." if flagged else "")
+    return f"""<h2>Convergence: slopes and time to relMSE {target:g}</h2>
+<p>Each strategy rendered progressively (1, 2, 4, &hellip; spp) once per seed, with
+{slopes[0]['seeds']} independent seeds (none of which the reference holds); the chart shows the
+mean over the seeds at each spp, &plusmn;1 standard error, and the range of the single seeds.
+Slopes are least-squares fits of log mean relMSE for spp &ge; {slopes[0]['first_spp_fitted']};
+intervals ({level}) are jackknife over the seeds with Student's t. An unbiased estimator's
+expected relMSE falls exactly as 1/spp (slope &minus;1); against time the slope is steeper at
+first, as each render also has fixed costs. The time to the target is interpolated between
+measured points, or extrapolated along the line fitted against spp (at the last doubling's cost
+per spp) only when its interval lies below 0 and the time is at most {EXTRAPOLATION_LIMIT:g}&times;
+the sweep's longest; otherwise n/a, with the reason.{caveat}</p>
+<table><tr><th>strategy</th><th>seeds</th><th>slope against spp [{level}]</th>
+<th>slope against time [{level}]</th><th>time to relMSE {target:g} [{level}]</th></tr>
+{''.join(rows)}
+</table>
+"""
+
+
+def write_index(out: Path, document: dict[str, Any], images: dict[str, list[list[str]]]) -> None:
+    """A static page with the grid, maps, charts and tables; relative links only. ``images``
+    maps a section title to its figures, each the list of its files (PNG first, shown; the
+    vector copies linked)."""
+    esc = html.escape
+    mode = document["mode"]
+    clock = mode.get("clock", "wall")
     rows = []
     for r in document["results"]:
         budget = f" of {r['budget']:.2f}" if "budget" in r else ""
@@ -269,10 +441,18 @@ def write_index(out: Path, document: dict[str, Any], images: dict[str, list[str]
             f"<td>{number(r['mse'])}</td><td>{number(r['relmse'])}</td><td>{number(r['variance'])}</td>"
             f"<td>{number(r['efficiency'])}</td><td>{number(r.get('flip'), '.3f')}</td></tr>")
     sections = []
-    for title, files in images.items():
-        figures = "".join(f'<a href="{esc(f)}"><img src="{esc(f)}" alt="{esc(f)}"></a>' for f in files)
-        sections.append(f"<h2>{esc(title)}</h2><div class=row>{figures}</div>")
-    mode = document["mode"]
+    for title, figures in images.items():
+        shown = "".join(f'<a href="{esc(f[0])}"><img src="{esc(f[0])}" alt="{esc(f[0])}"></a>'
+                        for f in figures)
+        vector = [name for f in figures for name in f[1:]]
+        also = ("<p class=also>Also as: " + ", ".join(f'<a href="{esc(v)}">{esc(v)}</a>' for v in vector)
+                + "</p>") if vector else ""
+        sections.append(f"<h2>{esc(title)}</h2><div class=row>{shown}</div>{also}")
+        if title.startswith("Error against time"):
+            sections.append(_convergence_html(document))
+    seconds_head = "CPU seconds" if clock == "cpu" else "seconds"
+    clock_text = ("process CPU time of each render, summed over its threads (time.process_time)"
+                  if clock == "cpu" else "wall-clock time of each render")
     page = f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8">
 <title>tracer compare: {esc(document['scene'])}</title>
@@ -281,18 +461,24 @@ body {{ font-family: sans-serif; margin: 1.5em; background: #fafafa; color: #222
 table {{ border-collapse: collapse; margin: 1em 0; }}
 td, th {{ border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }}
 td:first-child, th:first-child {{ text-align: left; }}
-.row img {{ max-width: 100%; margin: 0.3em; vertical-align: top; image-rendering: pixelated; }}
+.row img {{ max-width: 100%; margin: 0.3em; vertical-align: top; }}
+.row img[src="grid.png"] {{ image-rendering: pixelated; }}
+.row img[src$="_relerr.png"], .row img[src$="_flip.png"], .row img[src^="efficiency_"] {{ width: 460px; }}
+.row img[src$="convergence.png"] {{ width: 1100px; }}
+.row img[src$="allocation.png"] {{ width: 550px; }}
+p {{ max-width: 60em; }}
+.also {{ font-size: 0.85em; }}
 </style></head><body>
 <h1>{esc(document['scene'])}: sampling strategies compared</h1>
-<p>Mode: <b>{esc(mode['kind'])}</b> ({esc(mode['description'])}). Reference:
-<code>{esc(document['reference'])}</code> ({document['reference_spp']} spp,
+<p>Mode: <b>{esc(mode['kind'])}</b> ({esc(mode['description'])}). Times are the {clock_text}.
+Reference: <code>{esc(document['reference'])}</code> ({document['reference_spp']} spp,
 {esc(str(document['reference_strategy']))}).
 relMSE = mean (I&minus;R)&sup2;/(R&sup2;+0.01) and MSE = mean (I&minus;R)&sup2;, each less the
 reference's own variance (its noise, relMSE {number(document['reference_noise']['relmse'])}, which
 adds to every measured error; <code>*_uncorrected</code> in the data are as measured; the error maps
-are uncorrected); efficiency = 1/(relMSE &times; seconds), n/a where relMSE is not positive.
+are uncorrected); efficiency = 1/(relMSE &times; {seconds_head}), n/a where relMSE is not positive.
 Data: <a href="metrics.json">metrics.json</a>, <a href="metrics.csv">metrics.csv</a>.</p>
-<table><tr><th>strategy</th><th>spp</th><th>seconds</th><th>MSE</th><th>relMSE</th>
+<table><tr><th>strategy</th><th>spp</th><th>{seconds_head}</th><th>MSE</th><th>relMSE</th>
 <th>variance</th><th>efficiency</th><th>FLIP</th></tr>
 {''.join(rows)}
 </table>
@@ -302,11 +488,39 @@ Data: <a href="metrics.json">metrics.json</a>, <a href="metrics.csv">metrics.csv
     write_text(out / "index.html", page)
 
 
-def describe_mode(spp: int | None, budget: float | None) -> dict[str, Any]:
+def terminal_tables(document: dict[str, Any]) -> list[str]:
+    """The lines ``tracer compare`` prints after the results: the sweep's slopes and times to
+    the target relMSE, each with its interval (none without a sweep)."""
+    slopes, times = document.get("convergence", []), document.get("time_to_target", [])
+    if not slopes:
+        return []
+    unit = _unit(document["mode"].get("clock", "wall"))
+    level = f"{slopes[0]['confidence']:.0%}"
+    target = times[0]["target_relmse"]
+    width = max(8, *(len(r["strategy"]) for r in slopes))
+    slope_col = [slope_text(r, ascii_only=True) for r in slopes]
+    time_col = [time_text(t, unit, ascii_only=True) if t["seconds"] is not None else f"n/a: {t['note']}"
+                for t in times]
+    sw = max(len(f"slope/spp [{level}]"), *(len(c) for c in slope_col))
+    lines = [f"sweep: mean of {slopes[0]['seeds']} seeds per point; Monte Carlo's expected slope is -1",
+             f"{'strategy':<{width}}  {f'slope/spp [{level}]':<{sw}}  time to relMSE {target:g} [{level}]"]
+    lines += [f"{r['strategy']:<{width}}  {c:<{sw}}  {t}"
+              for r, c, t in zip(slopes, slope_col, time_col, strict=True)]
+    if any(r["holds_minus_one"] is False for r in slopes):
+        lines.append("* the interval excludes -1: a heavy-tailed estimator, whose rare large samples runs of "
+                     "few spp seldom draw (see index.html)")
+    return lines
+
+
+def describe_mode(spp: int | None, budget: float | None, clock: str = "wall") -> dict[str, Any]:
+    """The comparison's mode for ``metrics.json`` and the page: equal spp or equal time, and
+    the clock its seconds are measured on (``compare.CLOCKS``)."""
     if budget is not None:
-        return {"kind": "equal-time", "seconds": budget,
-                "description": f"every strategy renders for {budget:g} s"}
-    return {"kind": "equal-spp", "spp": spp, "description": f"every strategy renders {spp} spp"}
+        on = "of CPU time (summed over its threads)" if clock == "cpu" else "of wall-clock time"
+        return {"kind": "equal-time", "seconds": budget, "clock": clock,
+                "description": f"every strategy renders for {budget:g} s {on}"}
+    return {"kind": "equal-spp", "spp": spp, "clock": clock,
+            "description": f"every strategy renders {spp} spp"}
 
 
 def result_row(run: Run, flip: float) -> dict[str, Any]:
@@ -324,37 +538,28 @@ def efficiency_pairs(runs: list[Run]) -> list[tuple[Run, Run]]:
     return [(by_name[a], by_name[b]) for a, b in pairs if a in by_name and b in by_name]
 
 
-def time_to_target_rows(sweep: list[dict[str, Any]], target: float) -> list[dict[str, Any]]:
-    rows = []
-    for name in dict.fromkeys(p["strategy"] for p in sweep):
-        pts = [p for p in sweep if p["strategy"] == name]
-        seconds, extrapolated = time_to_reach(pts, target)
-        slope, _ = fit_convergence(pts, "spp")
-        rows.append({"strategy": name, "target_relmse": target, "seconds_to_target": seconds,
-                     "extrapolated": extrapolated, "slope_per_spp": slope})
-    return rows
-
-
 def make_report(out: Path, scene_name: str, reference_path: str, reference: Film, runs: list[Run],
                 mode: dict[str, Any], sweep: list[dict[str, Any]], allocation: list[Run],
                 crops: list[tuple[int, int, int, int]] | None, exposure: float,
-                target: float) -> dict[str, Any]:
-    """Write every file of a comparison into ``out`` and return the metrics document."""
+                target: float, figure_formats: tuple[str, ...] = ("png",)) -> dict[str, Any]:
+    """Write every file of a comparison into ``out`` and return the metrics document. Charts
+    and maps are written in each of ``figure_formats`` (PNG always: the page shows it)."""
     out.mkdir(parents=True, exist_ok=True)
-    images: dict[str, list[str]] = {}
+    clock = mode.get("clock", "wall")
+    formats = tuple(figure_formats)
+    images: dict[str, list[list[str]]] = {}
     windows = crops or pick_insets(runs, reference)
     grid_image(runs, reference, windows, exposure, out / "grid.png")
-    images["Side by side (insets: where the strategies differ most)"] = ["grid.png"]
+    images["Side by side (insets: where the strategies differ most)"] = [["grid.png"]]
 
     results, relerr_files, flip_files = [], [], []
     for run in runs:
         name = run_name(run)
         write_exr(out / f"{name}.exr", run.film)  # the header carries the record render() set
         write_png(out / f"{name}.png", run.film.image(), exposure)
-        relerr_map(run, reference, out / f"{name}_relerr.png")
-        flip = flip_map(run, reference, out / f"{name}_flip.png")
-        relerr_files.append(f"{name}_relerr.png")
-        flip_files.append(f"{name}_flip.png")
+        relerr_files.append(relerr_map(run, reference, out / f"{name}_relerr.png", formats))
+        flip = flip_map(run, reference, out / f"{name}_flip.png", formats)
+        flip_files.append([f"{name}_flip.{fmt}" for fmt in dict.fromkeys(("png", *formats))])
         results.append(result_row(run, flip))
     images["Relative squared error"] = relerr_files
     images["FLIP perceptual error"] = flip_files
@@ -362,9 +567,9 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
     wins = []
     ratio_files = []
     for a, b in efficiency_pairs(runs):
-        file = f"efficiency_{run_name(a)}_vs_{run_name(b)}.png"
-        share = ratio_map(a, b, reference, out / file)
-        ratio_files.append(file)
+        stem = f"efficiency_{run_name(a)}_vs_{run_name(b)}"
+        share = ratio_map(a, b, reference, out / f"{stem}.png", formats)
+        ratio_files.append([f"{stem}.{fmt}" for fmt in dict.fromkeys(("png", *formats))])
         wins.append({"a": run_name(a), "b": run_name(b), "share_a_wins": share["a_wins"],
                      "share_b_wins": share["b_wins"]})
     if ratio_files:
@@ -381,14 +586,17 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
                           "(unbiased for the image's own error); *_uncorrected are as measured"},
         "mode": mode, "results": results, "sweep": sweep, "efficiency_ratio": wins}
     if sweep:
-        convergence_chart(sweep, target, out / "convergence.png")
-        document["time_to_target"] = time_to_target_rows(sweep, target)
-        images["Error against time and samples"] = ["convergence.png"]
+        slopes, times = convergence_rows(sweep, target)
+        document["sweep_summary"] = [row for curve in sweep_curves(sweep).values() for row in curve.summary()]
+        document["convergence"] = slopes
+        document["time_to_target"] = times
+        images["Error against time and samples"] = [
+            convergence_chart(sweep, target, out / "convergence.png", slopes, times, clock, formats)]
     if allocation:
         rows = [run_row(r) for r in allocation]
-        allocation_chart(rows, out / "allocation.png")
         document["allocation"] = rows
-        images["MIS sample allocation (light : BSDF)"] = ["allocation.png"]
+        images["MIS sample allocation (light : BSDF)"] = [
+            allocation_chart(rows, out / "allocation.png", clock, formats)]
     write_tables(out, document)
     write_index(out, document, images)
     return document
