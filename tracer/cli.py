@@ -154,12 +154,36 @@ def build_parser() -> argparse.ArgumentParser:
 
     ch = sub.add_parser("check", help="regression-test noise levels and bias against a baseline",
                         description="Render every baseline entry with its seeds and test that noise did not "
-                        "grow (one-sided exact Mann-Whitney U tests) and the image is unbiased "
-                        "(per-pixel z-tests and an image-mean test against the reference), at a 1%% "
-                        "false-alarm rate for the file.")
+                        "grow (one-sided exact Mann-Whitney U tests of per-seed relMSE and variance), "
+                        "that the image mean did not move (a permutation test of the renders' image means "
+                        "against the baseline's) and that the image matches the reference (per-pixel "
+                        "z-tests), at a 1% false-alarm rate for the whole file. --create makes a baseline "
+                        "for your own scenes; --update re-measures one, tests its image mean against the "
+                        "reference (t-test) and refuses entries too heavy-tailed for that, naming the spp "
+                        "they need.")
     ch.add_argument("--baseline", default=None,
-                    help="baseline JSON (default renders/noise_baseline.json)")
-    ch.add_argument("--update", action="store_true", help="rewrite the baseline from fresh measurements")
+                    help="baseline JSON (default: ./tracer_baseline.json if present, else the source "
+                    "checkout's renders/noise_baseline.json)")
+    ch.add_argument("--update", action="store_true",
+                    help="re-measure the baseline's entries and rewrite it (refuses entries too heavy-tailed "
+                    "to test)")
+    ch.add_argument("--create", metavar="BASELINE",
+                    help="write a new baseline for --scenes x --strategies, rendering MIS references into "
+                    "references/ beside it")
+    ch.add_argument("--scenes", metavar="A.toml,B.toml",
+                    help="with --create: comma-separated scene files (or shipped scene names)")
+    ch.add_argument("--strategies", metavar="LIST",
+                    help="with --create: comma-separated strategies (uniform, cosine, bsdf, light, mis, "
+                    "mis-balance, mis-power, mis-max)")
+    ch.add_argument("--spp", type=_int_in(1, 2**31), default=None,
+                    help="with --create: samples per pixel of each seed's render (default 16)")
+    ch.add_argument("--seeds", type=_int_in(2, 64), default=None,
+                    help="with --create: renders (seeds 1..N) per entry (default 8)")
+    ch.add_argument("--reference-spp", type=_int_in(2, 2**31), default=None,
+                    help="with --create: MIS samples per pixel of each reference (default 1024)")
+    ch.add_argument("--size", type=_int_in(4, 4096), default=None,
+                    help="with --create: longer side of the check's images and references in pixels "
+                    "(default 64)")
     ch.add_argument("--out", default="check_failures", help="where the maps of failing entries go")
     ch.add_argument("--seed-offset", type=_seed, default=0,
                     help="add this to every seed (other random numbers, same statistics)")
@@ -557,9 +581,33 @@ def _warn_if_reference_is_noisy(reference_relmse: float, runs, reference_path: s
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from .study.check import DEFAULT_BASELINE, format_table, run_check
+    from .study.check import create_baseline, default_baseline, format_table, parse_strategies, run_check
 
-    baseline = Path(args.baseline) if args.baseline else DEFAULT_BASELINE
+    create_options = {"--scenes": args.scenes, "--strategies": args.strategies, "--spp": args.spp,
+                      "--seeds": args.seeds, "--reference-spp": args.reference_spp, "--size": args.size}
+    if args.create is None:
+        given = [name for name, value in create_options.items() if value is not None]
+        if given:
+            raise InputError(f"{given[0]} goes with --create BASELINE", "command line")
+    else:
+        clash = [name for name, value in (("--baseline", args.baseline), ("--update", args.update),
+                                          ("--seed-offset", args.seed_offset)) if value]
+        if clash:
+            raise InputError(f"--create writes a new baseline; {clash[0]} is for checking one",
+                             "command line")
+        for name in ("--scenes", "--strategies"):
+            if not create_options[name]:
+                raise InputError(f"--create needs {name}", "command line")
+        result = create_baseline(args.create, args.scenes.split(","), parse_strategies(args.strategies),
+                                 spp=args.spp or 16, seeds=args.seeds or 8,
+                                 reference_spp=args.reference_spp or 1024, size=args.size or 64,
+                                 threads=args.threads)
+        print(f"baseline written: {args.create} ({len(result.measurements)} entries); check with "
+              f"tracer check --baseline {args.create}", file=sys.stderr)
+        return 0
+    baseline = Path(args.baseline) if args.baseline else default_baseline()
+    if not args.baseline:
+        print(f"baseline: {baseline}", file=sys.stderr)
     result = run_check(baseline, update=args.update, out=_output_folder(args.out),
                        seed_offset=args.seed_offset, threads=args.threads)
     if args.update:
