@@ -61,6 +61,10 @@ material = "metal"
 """
 
 
+# GOOD with nothing emitting: a scene without lights.
+DARK = GOOD.replace("emission = [5.0, 5.0, 5.0]", "")
+
+
 def _mutate(old: str, new: str) -> str:
     assert old in GOOD, old
     return GOOD.replace(old, new, 1)
@@ -562,6 +566,6 @@ def test_default_names_tell_settings_apart_and_the_summary_says_them(tmp_path, m
                      "s_mis_max.exr"]
     assert "light (lights picked uniformly)" in capsys.readouterr().err
     dark = tmp_path / "dark.toml"
-    dark.write_text(GOOD.replace("emission = [5.0, 5.0, 5.0]", ""))
+    dark.write_text(DARK)
     assert main(["render", str(dark), "--spp", "1", "--quiet"]) == 0
     assert "has no lights" in capsys.readouterr().err

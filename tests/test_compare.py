@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 import pytest
+from test_cli import DARK
 
 from tracer import render_loop
 from tracer.cli import main
@@ -304,33 +305,12 @@ def test_reference_noise_correction_is_unbiased():
     assert abs(metrics.mse(image, reference) - 0.04) > 50 * standard_error
 
 
-NO_LIGHTS = """
-[camera]
-origin = [0.0, 1.0, 3.0]
-target = [0.0, 0.5, 0.0]
-fov = 40.0
-width = 8
-height = 8
-
-[materials.white]
-type = "diffuse"
-reflectance = [0.7, 0.7, 0.7]
-
-[[shapes]]
-type = "quad"
-origin = [-1.0, 0.0, -1.0]
-edge1 = [0.0, 0.0, 2.0]
-edge2 = [2.0, 0.0, 0.0]
-material = "white"
-"""
-
-
 def test_undefined_numbers_are_null_in_json_and_n_a_in_tables(tmp_path, capsys):
     """A scene without lights: every image is exactly black, relMSE 0, efficiency undefined.
     metrics.json must stay strict JSON (null, not NaN or Infinity, which it held before), the
     CSV cell empty, and the table on stderr and in index.html say n/a."""
     scene = tmp_path / "dark.toml"
-    scene.write_text(NO_LIGHTS)
+    scene.write_text(DARK)  # test_cli.GOOD with nothing emitting
     ref, out = tmp_path / "ref.exr", tmp_path / "cmp"
     assert main(["reference", str(scene), "-o", str(ref), "--spp", "2", "--quiet"]) == 0
     assert main(["compare", str(scene), "--reference", str(ref), "--spp", "1", "--strategies", "light,mis",
