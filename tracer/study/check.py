@@ -494,10 +494,8 @@ def mean_test(replicates: np.ndarray, ref_mean: np.ndarray, ref_se: np.ndarray) 
     channels apart, as their errors are almost perfectly correlated."""
     t, p = statistics.t_against_reference(replicates, ref_mean, ref_se)
     worst = np.argmin(p, axis=-1)[..., None]
-    p_min = np.clip(np.take_along_axis(p, worst, axis=-1)[..., 0], 0.0, 1.0)
-    family = -np.expm1(p.shape[-1] * np.log1p(-np.minimum(p_min, 1.0 - 1e-16)))  # statistics.sidak_family
-    family = np.where(p_min >= 1.0, 1.0, family)
-    return np.take_along_axis(t, worst, axis=-1)[..., 0], family
+    p_min = np.take_along_axis(p, worst, axis=-1)[..., 0]
+    return np.take_along_axis(t, worst, axis=-1)[..., 0], statistics.sidak_family(p_min, p.shape[-1])
 
 
 def judge(entries: list[Entry], measurements: dict[str, Measurement]) -> list[Verdict]:

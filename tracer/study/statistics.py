@@ -38,14 +38,16 @@ def sidak(alpha: float, m: int) -> float:
     return float(-np.expm1(np.log1p(-alpha) / max(int(m), 1)))
 
 
-def sidak_family(p: float, m: int) -> float:
+def sidak_family(p, m: int):
     """The family-wise p-value of the smallest of ``m`` independent p-values when it is ``p``:
     1 - (1 - p)^m (the inverse of :func:`sidak`). Rejecting when it is below alpha is the same
-    as rejecting when ``p < sidak(alpha, m)``."""
-    p = min(max(float(p), 0.0), 1.0)
-    if p >= 1.0:
-        return 1.0
-    return float(-np.expm1(max(int(m), 1) * np.log1p(-p)))
+    as rejecting when ``p < sidak(alpha, m)``. ``p`` a number (a float back) or an array (an
+    array of its shape back)."""
+    p = np.clip(np.asarray(p, dtype=np.float64), 0.0, 1.0)
+    # np.where evaluates both sides: cap p below 1 so that log1p stays finite where p = 1 (-> 1).
+    below_one = np.minimum(p, np.nextafter(1.0, 0.0))
+    family = np.where(p >= 1.0, 1.0, -np.expm1(max(int(m), 1) * np.log1p(-below_one)))
+    return float(family) if family.ndim == 0 else family
 
 
 def z_critical(alpha: float, m: int = 1, sides: int = 2) -> float:
