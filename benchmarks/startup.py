@@ -9,10 +9,15 @@ Runs ``tracer render SCENE --width 32 --height 32 --spp 1`` a few times in fresh
   the scipy it pulls in, OpenImageIO, embreex) and of tracer's own modules;
 - the phases inside one render: loading the scene, building the estimator (Embree scene, light
   tables), loading the compiled kernels from the cache (``render_loop._compile``), rendering and
-  writing the files.
+  writing the files. Loading the kernels includes numba's first-use set-up of its typing and
+  lowering registries, during which numba checks for a BLAS by importing ``scipy.linalg``
+  (about 0.35 s, found with cProfile); a scene with mesh files has already paid for much of
+  scipy through trimesh, so its kernel loading looks shorter.
 
 The machine's load average is printed with the numbers: on a shared machine wall time grows
-with the load, CPU time much less. Usage: ``python benchmarks/startup.py [SCENE] [--runs 5]``.
+with the load, CPU time much less. Usage: ``python benchmarks/startup.py [SCENE ...] [--runs 5]``
+(default: veach_mis, which has no mesh files and so never imports trimesh, and cornell, which
+has two).
 """
 
 from __future__ import annotations
@@ -96,23 +101,32 @@ def import_times(scene: str, out: str) -> dict[str, float]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("scene", nargs="?", default=str(ROOT / "scenes" / "cornell.toml"))
+    parser.add_argument("scenes", nargs="*", default=[str(ROOT / "scenes" / "veach_mis.toml"),
+                                                      str(ROOT / "scenes" / "cornell.toml")],
+                        help="scene files (default: veach_mis, no mesh files, and cornell, two PLY meshes)")
     parser.add_argument("--runs", type=int, default=5)
     args = parser.parse_args()
+    for scene in args.scenes:
+        report(scene, args.runs)
+    return 0
+
+
+def report(scene: str, runs: int) -> None:
+    """Measure one scene and print its figures."""
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "startup.exr")
-        run_command(args.scene, out)  # warm-up: fills the kernel cache if it is empty
-        commands = [run_command(args.scene, out) for _ in range(args.runs)]
-        imports = [import_times(args.scene, out) for _ in range(args.runs)]
+        run_command(scene, out)  # warm-up: fills the kernel cache if it is empty
+        commands = [run_command(scene, out) for _ in range(runs)]
+        imports = [import_times(scene, out) for _ in range(runs)]
         phases: dict[str, list[float]] = {}
-        for _ in range(args.runs):
-            done = subprocess.run([sys.executable, "-c", PHASES, args.scene, out], capture_output=True,
+        for _ in range(runs):
+            done = subprocess.run([sys.executable, "-c", PHASES, scene, out], capture_output=True,
                                   text=True, check=True)
             for line in done.stdout.splitlines():
                 name, seconds = line.split("\t")
                 phases.setdefault(name, []).append(float(seconds))
     load = os.getloadavg()
-    print(f"tracer render {Path(args.scene).name} --width 32 --height 32 --spp 1, median of {args.runs} "
+    print(f"tracer render {Path(scene).name} --width 32 --height 32 --spp 1, median of {runs} "
           f"runs; {os.cpu_count()} cores, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     print(f"  whole command: wall {statistics.median(w for w, _ in commands):.2f} s, "
           f"CPU {statistics.median(c for _, c in commands):.2f} s")
@@ -123,7 +137,6 @@ def main() -> int:
     print("  phases of one render (in-process):")
     for name, values in phases.items():
         print(f"    {name:<20} {statistics.median(values):6.2f} s")
-    return 0
 
 
 if __name__ == "__main__":

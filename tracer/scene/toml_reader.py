@@ -22,6 +22,7 @@ from ..camera import Camera
 from ..errors import InputError
 from ..record import MAX_SAMPLE_INDEX
 from ..strategy import STRATEGIES
+from .icosphere import unit_icosphere
 from .model import Scene, Shape
 
 # Film memory per pixel: count (int64), mean and M2 (3 float64 each), plus per-pass batch
@@ -395,12 +396,10 @@ def import_trimesh():
 
 
 def _icosphere(subdivisions: int, radius: float, center: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    trimesh = import_trimesh()
-
-    # A unit sphere scaled here: trimesh normalizes after scaling, which gives NaN vertices for
+    # A unit sphere scaled here: projecting onto a tiny radius directly gives NaN vertices for
     # radii below about 1e-16.
-    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
-    return np.asarray(mesh.vertices, dtype=np.float64) * radius + center, np.asarray(mesh.faces)
+    vertices, faces = unit_icosphere(subdivisions)
+    return vertices * radius + center, faces
 
 
 def _read_mesh(r: _Reader, mesh_path: Path) -> tuple[np.ndarray, np.ndarray]:
