@@ -252,6 +252,20 @@ def load_mitsuba_scene(scene_path: str, spp: int, seed: int, width=None, height=
             vertices, faces = quad_triangles(_vec3(shape["origin"], f"{where}.origin"),
                                              _vec3(shape["edge1"], f"{where}.edge1"),
                                              _vec3(shape["edge2"], f"{where}.edge2"))
+        elif kind == "sphere" and "subdivisions" not in shape:
+            # A true sphere (tracer >= 0.3): Mitsuba's analytic `sphere`, which its `area`
+            # emitter samples by the subtended cone, as tracer's solid-angle sampling does.
+            mat_name = shape.get("material")
+            if mat_name is not None and mat_name not in materials:
+                raise ValueError(f"{where}.material: unknown material {mat_name!r}")
+            sphere = {"type": "sphere", "center": _vec3(shape["center"], f"{where}.center").tolist(),
+                      "radius": float(shape["radius"]),
+                      "bsdf": _bsdf_dict(materials[mat_name] if mat_name is not None else None,
+                                         mat_name or where)}
+            if shape.get("emission") is not None:
+                sphere["emitter"] = {"type": "area", "radiance": _rgb(shape["emission"], where)}
+            scene[f"shape_{i}"] = sphere
+            continue
         elif kind == "sphere":
             vertices, faces = sphere_triangles(_vec3(shape["center"], f"{where}.center"),
                                                float(shape["radius"]),

@@ -62,8 +62,13 @@ def test_suite_covers_the_failure_cases_and_writes_its_files(suite):
         "scaled_0.001",
         "scaled_1000",
         "point_light_4l_4b",
+        "tiny_sphere_light",
+        "inside_sphere_light",
     ):
         assert required in names, required
+    # Every case has light and MIS with each light-sampling technique as columns of its own.
+    for column in ("light_solid-angle", "light_solid-angle-cos", "mis_solid-angle", "mis_solid-angle-cos"):
+        assert {c["case"] for c in doc["cells"] if c["strategy"] == column} == names, column
     assert json.loads((out / "stability.json").read_text())["cells"] == doc["cells"]
     assert (out / "stability.png").stat().st_size > 10_000
     cells = [Cell(**c) for c in doc["cells"]]

@@ -13,8 +13,8 @@ load_scene(source, width=None, height=None, base_dir=None) -> Scene
 render(scene, strategy="mis", spp=64, seed=0, **options) -> Image
 read_image(path) -> Image
 compare(image, reference, seconds=None) -> dict of mse, relmse, variance, efficiency
-Strategy(name, heuristic, light_samples, bsdf_samples, one_sample, light_selection)
-STRATEGIES : the strategy names.
+Strategy(name, heuristic, light_samples, bsdf_samples, one_sample, light_selection, light_sampling)
+STRATEGIES, LIGHT_SAMPLINGS : the strategy and light-sampling names.
 
 The renderer core is the rest of this package (scene, materials, lights, samplers,
 estimators, render_loop, film, imagefiles); the study tools (compare, check, stability, primer)
@@ -32,8 +32,9 @@ try:
 except PackageNotFoundError:  # running from a source tree that was not installed
     __version__ = "0.0.0+source"
 
-_API = {"Image": "api", "Scene": "scene", "Strategy": "strategy", "STRATEGIES": "strategy", "compare": "api",
-        "load_scene": "scene", "read_image": "api", "render": "api", "InputError": "errors"}
+_API = {"Image": "api", "Scene": "scene", "Strategy": "strategy", "STRATEGIES": "strategy",
+        "LIGHT_SAMPLINGS": "strategy", "compare": "api", "load_scene": "scene", "read_image": "api",
+        "render": "api", "InputError": "errors"}
 __all__ = sorted(_API)
 
 

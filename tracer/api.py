@@ -22,7 +22,7 @@ import numpy as np
 
 from .film import Film
 from .scene import Scene, load_scene
-from .strategy import Strategy
+from .strategy import DEFAULT_LIGHT_SAMPLING, Strategy
 
 __all__ = ["Image", "Scene", "Strategy", "compare", "load_scene", "read_image", "render"]
 
@@ -72,12 +72,15 @@ class Image:
 def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str | Strategy = "mis",
            spp: int = 64, seed: int = 0, *, threads: int | None = None, heuristic: str = "power",
            light_samples: int = 1, bsdf_samples: int = 1, one_sample: bool = False,
-           light_selection: str = "power", sampler: str = "independent", progress: bool = False) -> Image:
+           light_selection: str = "power", light_sampling: str | None = None, sampler: str = "independent",
+           progress: bool = False) -> Image:
     """Render ``scene`` (a :class:`Scene`, or a path or dict for :func:`load_scene`) with
     ``spp`` samples per pixel.
 
     strategy : ``uniform``, ``cosine``, ``bsdf``, ``light`` or ``mis``, or a :class:`Strategy`
-        (then the keyword options heuristic ... light_selection are ignored).
+        (then the keyword options heuristic ... light_sampling are ignored).
+    light_sampling : ``area``, ``solid-angle`` or ``solid-angle-cos`` (default: the scene's
+        ``[render] light_sampling``, else ``Strategy``'s default).
     seed : the same seed gives the same bits whatever ``threads`` (default: all cores).
     Raises ``ValueError`` for a bad option and ``tracer.errors.InputError`` for a bad scene.
     """
@@ -87,7 +90,9 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     if not isinstance(strategy, Strategy):
-        strategy = Strategy(strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection)
+        sampling = light_sampling or scene.render_defaults.get("light_sampling") or DEFAULT_LIGHT_SAMPLING
+        strategy = Strategy(strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection,
+                            sampling)
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
         raise ValueError(f"spp must be a whole number >= 1, got {spp!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:

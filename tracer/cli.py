@@ -110,7 +110,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render_options(ref)
     # None = not given: a resume takes these from the file, a new reference the usual defaults.
     ref.set_defaults(run=cmd_reference, heuristic=None, light_samples=None, bsdf_samples=None,
-                     one_sample=None, light_selection=None)
+                     one_sample=None, light_selection=None, light_sampling=None)
 
     c = sub.add_parser("compare", help="compare strategies against a reference: images, maps, charts",
                        description="Render several strategies at equal spp or equal time and compare them "
@@ -144,7 +144,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "comma-separated; PNG at 300 dpi is always written)")
     c.add_argument("--crop", action="append", type=_crop, metavar="X,Y,W,H",
                    help="inset region in pixels (repeatable; default: chosen where strategies differ most)")
-    _add_strategy_options(c)
+    _add_strategy_options(c, compared=True)
     c.add_argument("--seed", type=_seed, default=None,
                    help="random seed (default: the smallest the reference holds no samples of)")
     c.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
@@ -227,8 +227,9 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _add_strategy_options(p: argparse.ArgumentParser) -> None:
-    from .strategy import HEURISTICS, LIGHT_SELECTIONS
+def _add_strategy_options(p: argparse.ArgumentParser, compared: bool = False) -> None:
+    """The estimator's options; with ``compared``, ``--light-sampling`` takes a list."""
+    from .strategy import DEFAULT_LIGHT_SAMPLING, HEURISTICS, LIGHT_SAMPLINGS, LIGHT_SELECTIONS
 
     p.add_argument("--heuristic", choices=HEURISTICS, default="power", help="MIS heuristic (default power)")
     p.add_argument("--light-samples", type=_samples_per_camera_sample, default=1, metavar="N",
@@ -239,6 +240,27 @@ def _add_strategy_options(p: argparse.ArgumentParser) -> None:
                    help="one-sample MIS: each camera sample picks light or BSDF with probability N:M")
     p.add_argument("--light-selection", choices=LIGHT_SELECTIONS, default="power",
                    help="how to pick the light to sample (default: in proportion to power)")
+    if compared:
+        p.add_argument("--light-sampling", type=_light_samplings, default=None, metavar="LIST",
+                       help="comma-separated light-sampling techniques to compare, each with every "
+                       f"strategy that takes light samples: some of {', '.join(LIGHT_SAMPLINGS)} "
+                       f"(default: the scene's [render] light_sampling, else {DEFAULT_LIGHT_SAMPLING})")
+        return
+    p.add_argument("--light-sampling", choices=LIGHT_SAMPLINGS, default=None,
+                   help="how to sample the chosen light: by area, by the solid angle it subtends, or by "
+                   "solid angle warped toward the receiver's cosine (default: the scene's [render] "
+                   f"light_sampling, else {DEFAULT_LIGHT_SAMPLING})")
+
+
+def _light_samplings(text: str) -> list[str]:
+    from .strategy import LIGHT_SAMPLINGS
+
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    bad = [n for n in names if n not in LIGHT_SAMPLINGS]
+    if bad or not names or len(set(names)) != len(names):
+        what = f"unknown '{bad[0]}'" if bad else ("repeated names" if names else "empty")
+        raise argparse.ArgumentTypeError(f"{what} (expected some of {', '.join(LIGHT_SAMPLINGS)})")
+    return names
 
 
 def _add_render_options(p: argparse.ArgumentParser) -> None:
@@ -283,12 +305,16 @@ def _terminate_like_ctrl_c() -> None:
         signal.signal(signal.SIGTERM, handler)
 
 
-def _strategy_from(args: argparse.Namespace, name: str):
-    from .strategy import Strategy
+def _strategy_from(args: argparse.Namespace, name: str, light_sampling: str | None = None):
+    """The strategy ``name`` with the command line's options; the light sampling is
+    ``light_sampling``, else ``--light-sampling``, else the default."""
+    from .strategy import DEFAULT_LIGHT_SAMPLING, Strategy
 
+    given = getattr(args, "light_sampling", None)  # compare's is a list, handled by its caller
+    sampling = light_sampling or (given if isinstance(given, str) else None) or DEFAULT_LIGHT_SAMPLING
     try:
         return Strategy(name, args.heuristic, args.light_samples, args.bsdf_samples,
-                        args.one_sample, args.light_selection)
+                        args.one_sample, args.light_selection, sampling)
     except ValueError as exc:
         raise InputError(str(exc), "command line") from None
 
@@ -415,7 +441,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     scene_path = Path(args.scene) if args.scene else scene_mod.default_scene_path()
     scene = scene_mod.load_scene(scene_path, args.width, args.height)
     defaults = scene.render_defaults
-    strategy = _strategy_from(args, args.strategy or defaults.get("strategy", "mis"))
+    strategy = _strategy_from(args, args.strategy or defaults.get("strategy", "mis"),
+                              args.light_sampling or defaults.get("light_sampling"))
     spp = args.spp or defaults.get("spp", 64)
     # The default name tells settings apart (mis_balance, light_x4, seed 5), so that renders
     # with other options do not overwrite each other.
@@ -435,7 +462,7 @@ def cmd_reference(args: argparse.Namespace) -> int:
     output = _exr_path(args.output or f"{Path(args.scene).stem}_reference.exr")
     film, seed, first, sampler = None, args.seed, 0, "independent"
     defaults = {"heuristic": "power", "light_samples": 1, "bsdf_samples": 1, "one_sample": False,
-                "light_selection": "power"}
+                "light_selection": "power", "light_sampling": None}
     width, height = args.width, args.height
     if args.resume:
         if not output.is_file():
@@ -447,6 +474,8 @@ def cmd_reference(args: argparse.Namespace) -> int:
         width, height = width or film.width, height or film.height
         defaults.update({name: getattr(film.record, name) for name in defaults
                          if getattr(film.record, name) is not None})
+        if film.record.light_sampling is None:  # written by tracer <= 0.2, which sampled by area
+            defaults["light_sampling"] = "area"
     elif output.exists() and not args.force:
         raise InputError("a reference exists here: --resume adds samples to it, --force replaces it",
                          str(output))
@@ -454,7 +483,7 @@ def cmd_reference(args: argparse.Namespace) -> int:
         if getattr(args, name) is None:
             setattr(args, name, value)
     scene = scene_mod.load_scene(args.scene, width, height)
-    strategy = _strategy_from(args, "mis")
+    strategy = _strategy_from(args, "mis", args.light_sampling or scene.render_defaults.get("light_sampling"))
     _warn_if_dark(scene)
     if film is not None:
         if (film.width, film.height) != (scene.camera.width, scene.camera.height):
@@ -523,18 +552,23 @@ def cmd_compare(args: argparse.Namespace) -> int:
             return comparison.equal_time(strategy, args.time)
         return comparison.equal_spp(strategy, args.spp)
 
+    # Every strategy with every light sampling asked for; those without light samples once.
+    samplings = args.light_sampling or [scene.render_defaults.get("light_sampling")]
+    strategies = [_strategy_from(args, name, sampling) for name in names
+                  for sampling in (samplings if _strategy_from(args, name).light_count else samplings[:1])]
+
     mode = report.describe_mode(args.spp, args.time, args.clock)
     if not args.quiet:
         print(f"{scene.name}: {mode['description']} at {reference.width}x{reference.height}", file=sys.stderr)
     try:
-        runs = [run(_strategy_from(args, name)) for name in names]
+        runs = [run(strategy) for strategy in strategies]
         sweep, allocation = [], []
         if args.sweep:
-            for name in names:
-                sweep += comparison.sweep(_strategy_from(args, name), seeds, max_spp=args.spp,
-                                          budget=args.time)
+            for strategy in strategies:
+                sweep += comparison.sweep(strategy, seeds, max_spp=args.spp, budget=args.time)
+            first_sampling = _strategy_from(args, "mis", samplings[0]).light_sampling
             allocation = [run(Strategy("mis", args.heuristic, n_light, n_bsdf,
-                                       light_selection=args.light_selection))
+                                       light_selection=args.light_selection, light_sampling=first_sampling))
                           for n_light, n_bsdf in ALLOCATIONS]
     except KeyboardInterrupt:
         # A strategy cut short would be compared at less time or fewer samples than the others.

@@ -40,6 +40,7 @@ import numpy as np
 from . import lights, materials, mis, samplers, warp
 from .embree import RayCaster
 from .frame import add_scaled, basis, dot, normalized, scale, sub, to_local, to_world
+from .geometry import SceneRays, surface_point
 from .jit import jit
 from .lights import LightSampler
 from .samplers import dimensions
@@ -54,15 +55,17 @@ DIRECTION_CODE = {None: NO_DIRECTIONS, "uniform": UNIFORM, "cosine": COSINE, "bs
 class Surfaces(NamedTuple):
     """The scene as the kernels read it.
 
-    hit_table : (F, 16) per triangle: v0, edge1, edge2, face normal, emission, material row.
+    hit_table : (F + S, 16) per primitive (``Scene.hit_table``): geometry, emission, material row.
     material_kind : (K,) int8 material codes.   material_params : (K, W) their parameters.
     eps : ray offset along the normal (``Scene.ray_epsilon``).
+    first_sphere : F, the primitive id of the first analytic sphere.
     """
 
     hit_table: np.ndarray
     material_kind: np.ndarray
     material_params: np.ndarray
     eps: float
+    first_sphere: int
 
 
 class Plan(NamedTuple):
@@ -87,11 +90,13 @@ class DirectLighting:
     def __init__(self, scene: Scene, strategy: Strategy, caster: RayCaster | None = None):
         self.scene = scene
         self.strategy = strategy
-        self.caster = caster if caster is not None else RayCaster(scene.vertices, scene.faces)
-        self.lights = LightSampler(scene, strategy.light_selection)
+        self.rays = SceneRays(scene, caster)
+        self.caster = self.rays.caster
+        self.lights = LightSampler(scene, strategy.light_selection, strategy.light_sampling)
         m = scene.materials
         self.surfaces = Surfaces(np.ascontiguousarray(scene.hit_table), np.ascontiguousarray(m.kind),
-                                 np.ascontiguousarray(m.params, dtype=np.float64), float(scene.ray_epsilon))
+                                 np.ascontiguousarray(m.params, dtype=np.float64), float(scene.ray_epsilon),
+                                 int(scene.triangle_count))
         n_light, n_dir = strategy.light_count, strategy.direction_count
         self.plan = Plan(n_light, n_dir, DIRECTION_CODE[strategy.direction_technique],
                          mis.code(strategy.heuristic), strategy.one_sample_mis, n_light / (n_light + n_dir))
@@ -119,14 +124,14 @@ class DirectLighting:
         plan = self.plan
         shadow = RayBuffer.empty(n if plan.one_sample else n * plan.n_light)
         direction = RayBuffer.empty(n if plan.one_sample else n * plan.n_dir)
-        prim = self.caster.first_hit(origins, dirs)
+        prim = self.rays.first_hit(origins, dirs)
         radiance = np.empty((n, 3))
         tables = self.lights.tables
         n_shadow, n_direction = _shade(prim, origins, dirs, sampler, pixel, sample, self.surfaces, tables,
                                        plan, radiance, shadow, direction)
         s, d = slice(0, n_shadow), slice(0, n_direction)
-        blocked = self.caster.occluded(shadow.origin[s], shadow.dir[s], shadow.tmax[s])
-        found = self.caster.first_hit(direction.origin[d], direction.dir[d])
+        blocked = self.rays.occluded(shadow.origin[s], shadow.dir[s], shadow.tmax[s])
+        found = self.rays.first_hit(direction.origin[d], direction.dir[d])
         _gather(radiance, self.surfaces, tables, plan, shadow, blocked, direction, found)
         return radiance
 
@@ -139,8 +144,8 @@ class RayBuffer(NamedTuple):
     tmax : (c,) float32 shadow-ray length (shadow rays only).
     value : (c, 3) what the sample adds if its ray is unblocked (shadow) or hits an emitter
         (direction; then times the emitter's radiance and the MIS weight).
-    point : (c, 3) float64 shading point the ray leaves (direction rays only): the light pdf
-        of the direction is measured from it, as light sampling measures it.
+    point, normal : (c, 3) float64 shading point the ray leaves and its normal (direction rays
+        only): the light pdf of the direction is measured from them, as light sampling does.
     pdf : (c,) count-scaled pdf of the direction technique (direction rays only, for MIS).
     lane : (c,) camera lane the sample belongs to.   delta : (c,) a delta sample (weight 1).
     """
@@ -150,6 +155,7 @@ class RayBuffer(NamedTuple):
     tmax: np.ndarray
     value: np.ndarray
     point: np.ndarray
+    normal: np.ndarray
     pdf: np.ndarray
     lane: np.ndarray
     delta: np.ndarray
@@ -158,7 +164,8 @@ class RayBuffer(NamedTuple):
     def empty(cls, count: int) -> "RayBuffer":
         f32 = np.float32
         return cls(np.empty((count, 3), dtype=f32), np.empty((count, 3), dtype=f32),
-                   np.empty(count, dtype=f32), np.empty((count, 3)), np.empty((count, 3)), np.empty(count),
+                   np.empty(count, dtype=f32), np.empty((count, 3)), np.empty((count, 3)),
+                   np.empty((count, 3)), np.empty(count),
                    np.empty(count, dtype=np.int64), np.empty(count, dtype=np.bool_))
 
 
@@ -176,12 +183,13 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
     direction rays of every shading point into the buffers. Returns their counts."""
     hit_table, kinds, params, eps = (surfaces.hit_table, surfaces.material_kind, surfaces.material_params,
                                      surfaces.eps)
+    first_sphere = surfaces.first_sphere
     alias_prob, alias, pmf = light_tables.alias_prob, light_tables.alias, light_tables.pmf
     technique, rows, spheres = light_tables.technique, light_tables.rows, light_tables.spheres
     shadow_origin, shadow_dir, shadow_tmax = shadow.origin, shadow.dir, shadow.tmax
     shadow_value, shadow_lane = shadow.value, shadow.lane
     dir_origin, dir_dir = direction.origin, direction.dir
-    dir_value, dir_point = direction.value, direction.point
+    dir_value, dir_point, dir_normal = direction.value, direction.point, direction.normal
     dir_pdf, dir_lane, dir_delta = direction.pdf, direction.lane, direction.delta
     n_light, n_dir = float(plan.n_light), float(plan.n_dir)
     n_shadow = 0
@@ -192,8 +200,11 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         if p < 0:
             continue
         d = (float(dirs[lane, 0]), float(dirs[lane, 1]), float(dirs[lane, 2]))
-        face_normal = (hit_table[p, 9], hit_table[p, 10], hit_table[p, 11])
-        cos_view = -dot(face_normal, d)
+        o = (float(origins[lane, 0]), float(origins[lane, 1]), float(origins[lane, 2]))
+        # The shading point, where the ray meets the triangle's plane or the sphere (float64;
+        # Embree's own distance is float32), and the geometric normal of the primitive's front.
+        x, face_normal, cos_d = surface_point(hit_table, first_sphere, p, o, d)
+        cos_view = -cos_d
         # Emitters seen directly (weight 1 in every strategy): front side only.
         if cos_view > 0.0:
             for channel in range(3):
@@ -202,10 +213,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         kind = kinds[material]
         if kind == materials.NONE or cos_view == 0.0:
             continue
-        # The shading point, where the ray meets the triangle's plane (float64; Embree's own
-        # distance is float32), and a frame around the face normal flipped toward the viewer.
-        o = (float(origins[lane, 0]), float(origins[lane, 1]), float(origins[lane, 2]))
-        x = add_scaled(o, _plane_distance(hit_table, p, o, -cos_view), d)
+        # A frame around the face normal flipped toward the viewer.
         normal = scale(1.0 if cos_view > 0.0 else -1.0, face_normal)
         s, t = basis(normal)
         wo = to_local(s, t, normal, scale(-1.0, d))
@@ -265,6 +273,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
             dir_delta[n_direction] = delta
             for axis in range(3):
                 dir_point[n_direction, axis] = x[axis]
+                dir_normal[n_direction, axis] = normal[axis]
             n_direction = _put(dir_origin, dir_dir, dir_value, dir_lane, n_direction,
                                origin, wi_world, value, lane)
     return n_shadow, n_direction
@@ -326,9 +335,9 @@ def _gather(radiance, surfaces: Surfaces, light_tables, plan: Plan, shadow: RayB
             direction: RayBuffer, prim):
     """Add to ``radiance`` the light samples whose shadow rays are unblocked, and the direction
     samples whose rays hit the front of an emitter, weighted against the light technique."""
-    hit_table = surfaces.hit_table
+    hit_table, first_sphere = surfaces.hit_table, surfaces.first_sphere
     pmf, technique, rows = light_tables.pmf, light_tables.technique, light_tables.rows
-    candidate_of_triangle = light_tables.candidate_of_triangle
+    candidate_of_prim = light_tables.candidate_of_prim
     shadow_value, shadow_lane = shadow.value, shadow.lane
     for row in range(len(blocked)):
         if not blocked[row]:
@@ -337,20 +346,27 @@ def _gather(radiance, surfaces: Surfaces, light_tables, plan: Plan, shadow: RayB
                 radiance[lane, c] += shadow_value[row, c]
     other = plan.c_light if plan.one_sample else float(plan.n_light)
     dirs, values, points, pdfs = direction.dir, direction.value, direction.point, direction.pdf
-    lanes, deltas = direction.lane, direction.delta
+    normals, origins, lanes, deltas = direction.normal, direction.origin, direction.lane, direction.delta
     for row in range(len(prim)):
         p = prim[row]
         if p < 0:
             continue
         wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
-        cos_normal = hit_table[p, 9] * wi[0] + hit_table[p, 10] * wi[1] + hit_table[p, 11] * wi[2]
+        x = (points[row, 0], points[row, 1], points[row, 2])
+        if p < first_sphere:
+            cos_normal = hit_table[p, 9] * wi[0] + hit_table[p, 10] * wi[1] + hit_table[p, 11] * wi[2]
+            dist = _plane_distance(hit_table, p, x, cos_normal) if cos_normal < 0.0 else 0.0
+        else:  # the sphere point the ray found, and its distance from the shading point
+            o = (float(origins[row, 0]), float(origins[row, 1]), float(origins[row, 2]))
+            y, _, cos_normal = surface_point(hit_table, first_sphere, p, o, wi)
+            v = sub(y, x)
+            dist = math.sqrt(dot(v, v))
         if not cos_normal < 0.0:
             continue  # emitters shine from the front only
         w = 1.0
         if other > 0.0 and not deltas[row]:
-            x = (points[row, 0], points[row, 1], points[row, 2])
-            pdf_light = lights.pdf(pmf, technique, rows, candidate_of_triangle, x, p, wi,
-                                   _plane_distance(hit_table, p, x, cos_normal))
+            n = (normals[row, 0], normals[row, 1], normals[row, 2])
+            pdf_light = lights.pdf(pmf, technique, rows, candidate_of_prim, x, n, p, wi, dist)
             w = mis.weight_of(plan.heuristic, pdfs[row], other * pdf_light)
         lane = lanes[row]
         for c in range(3):

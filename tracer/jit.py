@@ -13,7 +13,8 @@ The estimator runs loops over lanes in compiled code instead of ~100 whole-array
 - ``error_model="numpy"``: x / 0 gives inf or nan as in numpy instead of raising, so a
   degenerate sample is caught by the render loop's non-finite guard;
 - ``inline="always"``: small per-lane functions are inlined into the kernels before numba's
-  own optimizations (measured: 370 -> 200 ns a lane for MIS shading).
+  own optimizations (measured: 370 -> 200 ns a lane for MIS shading); ``jit_called`` leaves
+  the large solid-angle light techniques as calls, to keep the first compilation short.
 
 Floating-point semantics stay IEEE (no ``fastmath``): results match numpy to rounding.
 
@@ -230,6 +231,7 @@ if _CACHE_CLASS is None:
     CACHE = False
 
 _compile = njit(nogil=True, error_model="numpy", inline="always")
+_compile_called = njit(nogil=True, error_model="numpy", inline="never")
 
 
 def _attach_cache(dispatcher) -> None:
@@ -252,7 +254,19 @@ def _attach_cache(dispatcher) -> None:
 def jit(py_func):
     """Compile ``py_func`` with tracer's options (module docstring), cached on disk when a
     cache folder is writable."""
-    dispatcher = _compile(py_func)
+    return _cached(_compile(py_func))
+
+
+def jit_called(py_func):
+    """As :func:`jit`, but callers call the compiled function instead of inlining it: for the
+    large solid-angle light techniques, whose inlining into both kernels multiplied the first
+    compilation's time (measured: over 2 minutes). A call costs a few nanoseconds; the cheap
+    techniques (area, point, sphere) stay inlined, since calling the whole light dispatcher
+    instead made cornell's area-sampled MIS 20% slower."""
+    return _cached(_compile_called(py_func))
+
+
+def _cached(dispatcher):
     if CACHE and hasattr(dispatcher, "_cache"):
         _attach_cache(dispatcher)
     return dispatcher

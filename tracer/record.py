@@ -33,7 +33,7 @@ from .errors import InputError
 PREFIX = "tracer:"
 # The fields that define the estimator: renders may be pooled only if all of them agree.
 ESTIMATOR_FIELDS = ("strategy", "heuristic", "light_samples", "bsdf_samples", "one_sample",
-                    "light_selection", "sampler")
+                    "light_selection", "light_sampling", "sampler")
 MAX_SEED = 2**64 - 1
 MAX_SAMPLE_INDEX = 2**53  # sample counts stay exact in float64
 # (seed, first, next): samples first .. next - 1 of every pixel, drawn with seed.
@@ -80,8 +80,9 @@ def parse_ranges(text: str) -> tuple[SampleRange, ...]:
 class RenderRecord:
     """How a render was made. ``None`` where a file did not say (files of other tools).
 
-    strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection : the
-        estimator (``tracer.strategy.Strategy``; heuristic ``none`` unless the strategy is mis).
+    strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection,
+        light_sampling : the estimator (``tracer.strategy.Strategy``; heuristic ``none`` unless
+        the strategy is mis, light_sampling ``none`` unless it takes light samples).
     sampler : the random-number sampler (``independent``).
     samples : the sample ranges ``(seed, first, next)`` the film holds (``canonical_ranges``).
     seconds : rendering wall time, summed over the runs pooled into the film.
@@ -95,6 +96,7 @@ class RenderRecord:
     bsdf_samples: int | None = None
     one_sample: bool | None = None
     light_selection: str | None = None
+    light_sampling: str | None = None
     sampler: str | None = None
     samples: tuple[SampleRange, ...] | None = None
     seconds: float | None = None
@@ -113,6 +115,7 @@ class RenderRecord:
                    heuristic=strategy.recorded_heuristic,
                    light_samples=int(strategy.light_count), bsdf_samples=int(strategy.direction_count),
                    one_sample=bool(strategy.one_sample), light_selection=strategy.light_selection,
+                   light_sampling=strategy.recorded_light_sampling,
                    sampler=sampler, samples=((int(seed), int(first_sample), int(first_sample + spp)),),
                    seconds=float(seconds), scene=str(scene.path), scene_digest=scene.digest,
                    version=__version__)
@@ -205,8 +208,14 @@ def _names() -> dict[str, tuple[str, ...]]:
     with the file's sampler. (The strategy and heuristic are only compared and shown, and other
     tools name theirs as they like: the Mitsuba cross-check writes ``mitsuba-direct``.)"""
     from .samplers import SAMPLERS
+    from .strategy import LIGHT_SAMPLINGS
 
-    return {"sampler": SAMPLERS}
+    return {"sampler": SAMPLERS, "light_sampling": (*LIGHT_SAMPLINGS, "none")}
+
+
+def _old_light_sampling(record: RenderRecord) -> str:
+    """What a file written before ``tracer:light_sampling`` existed (tracer <= 0.2) did."""
+    return "area" if record.light_samples else "none"
 
 
 def _whole(value: Any) -> int:
@@ -231,6 +240,8 @@ def check_mergeable(a: RenderRecord, b: RenderRecord, name_a: str = "the first r
         va, vb = getattr(a, name), getattr(b, name)
         if name == "sampler":  # files from before the sampler existed used the independent one
             va, vb = va or "independent", vb or "independent"
+        if name == "light_sampling":  # files from before it existed sampled lights by area
+            va, vb = va or _old_light_sampling(a), vb or _old_light_sampling(b)
         if va != vb:
             raise InputError(f"cannot pool {name_a} and {name_b}: different {PREFIX}{name} "
                              f"({va!r} and {vb!r})")

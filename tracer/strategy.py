@@ -25,6 +25,10 @@ from dataclasses import dataclass
 STRATEGIES = ("uniform", "cosine", "bsdf", "light", "mis")
 HEURISTICS = ("balance", "power", "max")
 LIGHT_SELECTIONS = ("power", "uniform")
+# How a chosen light is sampled (``tracer.lights``): by area, by solid angle, or by solid angle
+# warped toward the receiver's cosine.
+LIGHT_SAMPLINGS = ("area", "solid-angle", "solid-angle-cos")
+DEFAULT_LIGHT_SAMPLING = "area"
 # The direction technique of each strategy that takes direction samples.
 DIRECTION_TECHNIQUE = {"uniform": "uniform", "cosine": "cosine", "bsdf": "bsdf", "mis": "bsdf"}
 
@@ -41,6 +45,9 @@ class Strategy:
     one_sample : one-sample MIS: each camera sample takes one technique, chosen with
         probability light_samples : bsdf_samples.
     light_selection : how the light to sample is chosen (``power`` or ``uniform``).
+    light_sampling : how a point or direction on the chosen light is drawn (``area``,
+        ``solid-angle``, ``solid-angle-cos``); used by ``light`` and ``mis`` (whose BSDF samples
+        are weighted with its pdf).
 
     Raises ``ValueError`` with a message naming the bad field.
     """
@@ -51,6 +58,7 @@ class Strategy:
     bsdf_samples: int = 1
     one_sample: bool = False
     light_selection: str = "power"
+    light_sampling: str = DEFAULT_LIGHT_SAMPLING
 
     def __post_init__(self) -> None:
         if self.name not in STRATEGIES:
@@ -60,6 +68,9 @@ class Strategy:
         if self.light_selection not in LIGHT_SELECTIONS:
             raise ValueError(f"unknown light selection {self.light_selection!r}; "
                              f"expected one of {', '.join(LIGHT_SELECTIONS)}")
+        if self.light_sampling not in LIGHT_SAMPLINGS:
+            raise ValueError(f"unknown light sampling {self.light_sampling!r}; "
+                             f"expected one of {', '.join(LIGHT_SAMPLINGS)}")
         for field_name in ("light_samples", "bsdf_samples"):
             count = getattr(self, field_name)
             if isinstance(count, bool) or not isinstance(count, int) or count < 0:
@@ -72,6 +83,8 @@ class Strategy:
         """A short description such as ``mis (power, 1 light + 1 bsdf)``."""
         uniform = self.light_count and self.light_selection == "uniform"
         selection = ", lights picked uniformly" if uniform else ""
+        if self.light_count and self.light_sampling != DEFAULT_LIGHT_SAMPLING:
+            selection += f", {self.light_sampling} light sampling"
         if self.name == "mis":
             mode = "one-sample, " if self.one_sample else ""
             return (f"mis ({mode}{self.heuristic}, {self.light_samples} light + {self.bsdf_samples} bsdf"
@@ -96,6 +109,8 @@ class Strategy:
             parts.append(f"x{self.light_count or self.direction_count}")
         if self.light_count and self.light_selection == "uniform":
             parts.append("uniform-lights")
+        if self.light_count and self.light_sampling != DEFAULT_LIGHT_SAMPLING:
+            parts.append(self.light_sampling)
         return "_".join(parts)
 
     @property
@@ -117,6 +132,11 @@ class Strategy:
     def recorded_heuristic(self) -> str:
         """The heuristic as records and reports state it: ``none`` unless the strategy is mis."""
         return self.heuristic if self.name == "mis" else "none"
+
+    @property
+    def recorded_light_sampling(self) -> str:
+        """The light sampling as records state it: ``none`` unless the strategy takes light samples."""
+        return self.light_sampling if self.light_count else "none"
 
     @property
     def one_sample_mis(self) -> bool:

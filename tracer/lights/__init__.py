@@ -2,22 +2,37 @@
 
 A light sample is two decisions: which emitter candidate (``selection.py``: by power or
 uniformly, Walker's alias table) and a direction toward it by that candidate's **technique**,
-which may depend on the shading point x and its normal n (cone sampling of spheres and
-spherical triangles will). Every candidate has a technique code and a row of named columns in
-one float32 table; the interface, dispatched on the code, is
+which may depend on the shading point x and its normal n. Every candidate has a technique code
+and a row of named columns in one float32 table; the interface, dispatched on the code, is
 
 - :func:`sample` ``(x, n, u) -> (wi, dist, le, pdf, delta)``: the selection probability is
   multiplied into ``pdf`` here, where MIS needs it (pdf in solid angle; for a delta light,
   the selection probability alone);
-- :func:`pdf` ``(x, hit, wi)``: the pdf with which :func:`sample` would produce the direction
-  ``wi`` from ``x`` that hits the emitting triangle ``hit`` at distance ``dist``.
+- :func:`pdf` ``(x, n, hit, wi, dist)``: the pdf with which :func:`sample` would produce the
+  direction ``wi`` from ``x`` that hits the emitting primitive ``hit`` at distance ``dist``.
 
-=================  ====  ===================================================
-technique          code  module
-=================  ====  ===================================================
-triangle_area      0     ``triangle_area.py``: uniform by area, converted to solid angle
-point              1     ``point.py``: a delta light
-=================  ====  ===================================================
+Which technique a candidate gets is the render's **light sampling** (``LIGHT_SAMPLINGS``):
+
+=================  =====================================================================
+light sampling     emitting triangle / rectangular quad / analytic sphere
+=================  =====================================================================
+area               triangle by area (a quad is its two triangles) / sphere by area
+solid-angle        spherical triangle / spherical rectangle / cone
+solid-angle-cos    the same two warped toward the receiver's cosine / cone
+=================  =====================================================================
+
+=========================  ====  ====================================================
+technique                  code  module
+=========================  ====  ====================================================
+triangle_area              0     ``triangle_area.py``: uniform by area, to solid angle
+point                      1     ``point.py``: a delta light
+sphere_area                2     ``sphere.py``: uniform on the sphere by area
+sphere_cone                3     ``sphere.py``: uniform in the subtended cone
+spherical_triangle         4     ``triangle_solid_angle.py``: uniform in solid angle
+spherical_triangle_cos     5     the same, bilinear warp toward the receiver's cosine
+spherical_rectangle        6     ``rectangle.py``: uniform in solid angle
+spherical_rectangle_cos    7     the same, bilinear warp toward the receiver's cosine
+=========================  ====  ====================================================
 
 Adding a technique: a module with ``NAME``, its column layout, ``sample`` (and ``pdf`` if it
 can be hit by a ray); a code in ``TECHNIQUES``; a branch in :func:`sample` and :func:`pdf`;
@@ -35,15 +50,21 @@ from typing import NamedTuple
 import numpy as np
 
 from ..jit import jit
-from . import point, selection, triangle_area
+from ..strategy import LIGHT_SAMPLINGS
+from . import point, rectangle, selection, sphere, triangle_area, triangle_solid_angle
 from .bounds import emitter_spheres, may_reach
 
-TECHNIQUES = (triangle_area.NAME, point.NAME)  # the code of a technique is its index here
-TRIANGLE_AREA, POINT = 0, 1
-ROW_WIDTH = max(triangle_area.WIDTH, point.WIDTH)
+TECHNIQUES = ("triangle_area", "point", "sphere_area", "sphere_cone", "spherical_triangle",
+              "spherical_triangle_cos", "spherical_rectangle", "spherical_rectangle_cos")
+(TRIANGLE_AREA, POINT, SPHERE_AREA, SPHERE_CONE, SPHERICAL_TRIANGLE, SPHERICAL_TRIANGLE_COS,
+ SPHERICAL_RECTANGLE, SPHERICAL_RECTANGLE_COS) = range(len(TECHNIQUES))
+ROW_WIDTH = max(triangle_area.WIDTH, point.WIDTH, sphere.WIDTH, rectangle.WIDTH)
 SELECTIONS = ("power", "uniform")
 # Smallest emitting triangle the light table takes: 1 / area must be finite in float32.
 MIN_LIGHT_AREA = float(np.finfo(np.float32).tiny)
+# A quad is sampled as a rectangle when its edges are perpendicular to this relative precision
+# (|e1 . e2| <= RECTANGLE_TOLERANCE |e1| |e2|); other quads as two triangles.
+RECTANGLE_TOLERANCE = 1e-6
 
 
 class LightTables(NamedTuple):
@@ -55,9 +76,10 @@ class LightTables(NamedTuple):
     rows : (K, ROW_WIDTH) float32, each candidate's parameters in its technique's columns.
         float32 as the scene holds vertices and emission; a row is one 64-byte cache line,
         which light sampling reads at random.
-    candidate_of_triangle : (F,) int32, the candidate that is scene triangle f (-1: none),
-        for the pdf of a direction that hits it.
-    spheres : (S, 4) float64 bounding spheres (center, radius) of the emitting triangles
+    candidate_of_prim : (F + S,) int32, the candidate that scene primitive p (a triangle, or
+        an analytic sphere from F on) belongs to (-1: none), for the pdf of a direction that
+        hits it; both triangles of a quad sampled as a rectangle map to its one candidate.
+    spheres : (B, 4) float64 bounding spheres (center, radius) of the emitters
         (``bounds.may_reach``).
     """
 
@@ -66,7 +88,7 @@ class LightTables(NamedTuple):
     pmf: np.ndarray
     technique: np.ndarray
     rows: np.ndarray
-    candidate_of_triangle: np.ndarray
+    candidate_of_prim: np.ndarray
     spheres: np.ndarray
 
 
@@ -87,58 +109,141 @@ def sample(alias_prob, alias, pmf, technique, rows, x, n, u_select: float, u0: f
         return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, False
     k = selection.pick(alias_prob, alias, u_select)
     code = technique[k]
-    if code == TRIANGLE_AREA:
-        wi, dist, le, p = triangle_area.sample(rows, k, x, u0, u1)
-        return wi, dist, le, pmf[k] * p, False
     if code == POINT:
         wi, dist, le = point.sample(rows, k, x)
         return wi, dist, le, (pmf[k] if dist > 0.0 else 0.0), True
-    return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, False
+    if code == TRIANGLE_AREA:
+        wi, dist, le, p = triangle_area.sample(rows, k, x, u0, u1)
+    elif code == SPHERE_AREA:
+        wi, dist, le, p = sphere.sample_area(rows, k, x, u0, u1)
+    elif code == SPHERE_CONE:
+        wi, dist, le, p = sphere.sample_cone(rows, k, x, u0, u1)
+    elif code == SPHERICAL_TRIANGLE or code == SPHERICAL_TRIANGLE_COS:
+        wi, dist, le, p = triangle_solid_angle.sample(rows, k, x, n, code == SPHERICAL_TRIANGLE_COS, u0, u1)
+    elif code == SPHERICAL_RECTANGLE or code == SPHERICAL_RECTANGLE_COS:
+        wi, dist, le, p = rectangle.sample(rows, k, x, n, code == SPHERICAL_RECTANGLE_COS, u0, u1)
+    else:
+        return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, False
+    return wi, dist, le, pmf[k] * p, False
 
 
 @jit
-def pdf(pmf, technique, rows, candidate_of_triangle, x, prim: int, wi, dist: float) -> float:
+def pdf(pmf, technique, rows, candidate_of_prim, x, n, prim: int, wi, dist: float) -> float:
     """Solid-angle pdf with which :func:`sample` picks the direction ``wi`` (world) from ``x``
-    that hits scene triangle ``prim`` at distance ``dist``; 0 for non-emitters and back sides."""
-    k = candidate_of_triangle[prim]
+    with normal ``n`` that hits scene primitive ``prim`` at distance ``dist``; 0 for
+    non-emitters and back sides."""
+    k = candidate_of_prim[prim]
     if k < 0:
         return 0.0
-    if technique[k] == TRIANGLE_AREA:
-        return pmf[k] * triangle_area.pdf(rows, k, x, wi, dist)
-    return 0.0
+    code = technique[k]
+    if code == TRIANGLE_AREA:
+        p = triangle_area.pdf(rows, k, x, wi, dist)
+    elif code == SPHERE_AREA:
+        p = sphere.pdf_area(rows, k, x, wi, dist)
+    elif code == SPHERE_CONE:
+        p = sphere.pdf_cone(rows, k, x, wi, dist)
+    elif code == SPHERICAL_TRIANGLE or code == SPHERICAL_TRIANGLE_COS:
+        p = triangle_solid_angle.pdf(rows, k, x, n, code == SPHERICAL_TRIANGLE_COS, wi, dist)
+    elif code == SPHERICAL_RECTANGLE or code == SPHERICAL_RECTANGLE_COS:
+        p = rectangle.pdf(rows, k, x, n, code == SPHERICAL_RECTANGLE_COS, wi, dist)
+    else:
+        return 0.0
+    return pmf[k] * p
 
 
-def build_tables(scene, light_selection: str = "power") -> tuple[LightTables, np.ndarray]:
+def _rectangles(scene, tri: np.ndarray) -> tuple[list[int], np.ndarray]:
+    """The emitting quads among ``scene.shapes`` that are rectangles with both triangles in
+    ``tri``: their shape indices and ``(Q, 3, 3)`` corner, edge u, edge v (float32-rounded, as
+    the triangles Embree intersects)."""
+    in_table = set(tri.tolist())
+    found, frames = [], []
+    for index, shape in enumerate(scene.shapes):
+        if shape.type != "quad" or shape.count != 2 or not shape.emissive:
+            continue
+        if shape.first not in in_table or shape.first + 1 not in in_table:
+            continue
+        corner = np.asarray(shape.record["origin"], dtype=np.float32).astype(np.float64)
+        e1 = np.asarray(shape.record["edge1"], dtype=np.float32).astype(np.float64)
+        e2 = np.asarray(shape.record["edge2"], dtype=np.float32).astype(np.float64)
+        if abs(np.dot(e1, e2)) <= RECTANGLE_TOLERANCE * np.linalg.norm(e1) * np.linalg.norm(e2):
+            found.append(index)
+            frames.append([corner, e1, e2])
+    return found, np.array(frames, dtype=np.float64).reshape(-1, 3, 3)
+
+
+def build_tables(scene, light_selection: str = "power",
+                 light_sampling: str = "area") -> tuple[LightTables, np.ndarray]:
     """The light tables of ``scene`` (a ``tracer.scene.Scene``), and ``(K,)`` the shape index of
-    each candidate (-1 - i for point light i). Every emitting triangle of positive area is a
-    ``triangle_area`` candidate, every point light of positive intensity a ``point`` one."""
+    each candidate (-1 - i for point light i).
+
+    Candidates: every emitting triangle of positive area (under ``solid-angle`` sampling a
+    rectangular quad is one candidate instead of two triangles), every emitting analytic
+    sphere and every point light of positive intensity; their techniques follow
+    ``light_sampling`` (module docstring)."""
     if light_selection not in SELECTIONS:
         raise ValueError(f"light selection must be one of {SELECTIONS}, got {light_selection!r}")
+    if light_sampling not in LIGHT_SAMPLINGS:
+        raise ValueError(f"light sampling must be one of {LIGHT_SAMPLINGS}, got {light_sampling!r}")
+    solid, cos_warp = light_sampling != "area", light_sampling == "solid-angle-cos"
     # Emission is >= 0, so a triangle with area and some positive channel has positive flux.
     # The table holds 1 / area in float32: a triangle smaller than float32's smallest normal
     # number (a sphere of radius 1e-20) would put inf there, so it is left out like a zero-area
     # one (never light-sampled; a BSDF sample that hits it gets weight 1, consistently).
     tri = np.flatnonzero((scene.area >= MIN_LIGHT_AREA) & (scene.emission.max(axis=1, initial=0.0) > 0.0))
-    tri_flux = np.pi * scene.area[tri] * scene.emission[tri].mean(axis=1)
+    quads, frames = _rectangles(scene, tri) if solid else ([], np.zeros((0, 3, 3)))
+    in_quad = np.isin(tri, [scene.shapes[q].first + i for q in quads for i in (0, 1)])
+    tri_alone = tri[~in_quad]
+    quad_area = np.linalg.norm(np.cross(frames[:, 1], frames[:, 2]), axis=1)
+    quad_emission = np.array([scene.shapes[q].emission for q in quads]).reshape(-1, 3)
+    sph = np.flatnonzero((scene.sphere_emission.max(axis=1, initial=0.0) > 0.0)
+                         & (4.0 * np.pi * scene.spheres[:, 3] ** 2 >= MIN_LIGHT_AREA))
+    sphere_area = 4.0 * np.pi * scene.spheres[sph, 3] ** 2
     point_flux = 4.0 * np.pi * scene.point_intensity.mean(axis=1)
     points = np.flatnonzero(point_flux > 0.0)
-    owner = np.concatenate([scene.shape_of_triangle[tri], -1 - points]).astype(np.int64)
-    weight = selection.weights(light_selection, np.concatenate([tri_flux, point_flux[points]]), owner,
-                               np.concatenate([scene.area[tri], np.ones(len(points))]))
+
+    flux = np.concatenate([np.pi * scene.area[tri_alone] * scene.emission[tri_alone].mean(axis=1),
+                           np.pi * quad_area * quad_emission.mean(axis=1),
+                           np.pi * sphere_area * scene.sphere_emission[sph].mean(axis=1), point_flux[points]])
+    owner = np.concatenate([scene.shape_of_triangle[tri_alone], np.array(quads, dtype=np.int64),
+                            scene.shape_of_sphere[sph], -1 - points]).astype(np.int64)
+    weight = selection.weights(light_selection, flux, owner,
+                               np.concatenate([scene.area[tri_alone], quad_area, sphere_area,
+                                               np.ones(len(points))]))
     count = len(weight)
     pmf = weight / weight.sum() if count else weight
     alias_prob, alias = selection.alias_table(pmf)
+
     rows = np.zeros((count, ROW_WIDTH), dtype=np.float32)
-    corners = scene.vertices[scene.faces[tri]]
-    rows[: len(tri), : triangle_area.WIDTH] = triangle_area.rows(corners, scene.normal[tri],
-                                                                 scene.emission[tri], scene.area[tri])
-    rows[len(tri):, : point.WIDTH] = point.rows(scene.point_position[points], scene.point_intensity[points])
-    technique = np.array([TRIANGLE_AREA] * len(tri) + [POINT] * len(points), dtype=np.int8)
-    candidate_of_triangle = np.full(len(scene.faces), -1, dtype=np.int32)
-    candidate_of_triangle[tri] = np.arange(len(tri), dtype=np.int32)
-    spheres = emitter_spheres(corners, scene.shape_of_triangle[tri], scene.ray_epsilon)
+    technique = np.zeros(count, dtype=np.int8)
+    first_quad = len(tri_alone)
+    first_sphere = first_quad + len(quads)
+    first_point = first_sphere + len(sph)
+    corners = scene.vertices[scene.faces[tri_alone]]
+    rows[:first_quad, :triangle_area.WIDTH] = triangle_area.rows(
+        corners, scene.normal[tri_alone], scene.emission[tri_alone], scene.area[tri_alone])
+    technique[:first_quad] = (SPHERICAL_TRIANGLE_COS if cos_warp else SPHERICAL_TRIANGLE) if solid \
+        else TRIANGLE_AREA
+    rows[first_quad:first_sphere, :rectangle.WIDTH] = rectangle.rows(frames, quad_emission)
+    technique[first_quad:first_sphere] = SPHERICAL_RECTANGLE_COS if cos_warp else SPHERICAL_RECTANGLE
+    rows[first_sphere:first_point, :sphere.WIDTH] = sphere.rows(scene.spheres[sph],
+                                                                scene.sphere_emission[sph])
+    technique[first_sphere:first_point] = SPHERE_CONE if solid else SPHERE_AREA
+    rows[first_point:, :point.WIDTH] = point.rows(scene.point_position[points], scene.point_intensity[points])
+    technique[first_point:] = POINT
+
+    first_prim_sphere = len(scene.faces)
+    candidate_of_prim = np.full(first_prim_sphere + len(scene.spheres), -1, dtype=np.int32)
+    candidate_of_prim[tri_alone] = np.arange(first_quad, dtype=np.int32)
+    for i, q in enumerate(quads):
+        candidate_of_prim[scene.shapes[q].first:scene.shapes[q].first + 2] = first_quad + i
+    candidate_of_prim[first_prim_sphere + sph] = np.arange(first_sphere, first_point, dtype=np.int32)
+
+    # Bounding spheres for the culling of direction rays: one per emissive shape.
+    emit_tri = tri  # the quads' triangles bound the rectangles exactly
+    spheres = emitter_spheres(scene.vertices[scene.faces[emit_tri]], scene.shape_of_triangle[emit_tri],
+                              scene.ray_epsilon, scene.spheres[sph], scene.shape_of_sphere[sph])
     tables = LightTables(alias_prob, alias, pmf, technique, np.ascontiguousarray(rows),
-                         candidate_of_triangle, spheres)
+                         candidate_of_prim, spheres)
     return tables, owner
 
 
@@ -169,25 +274,28 @@ class LightSampler:
     candidate (-1 - i for point light i).   pmf : (K,) selection probabilities.
     """
 
-    def __init__(self, scene, selection: str = "power"):
+    def __init__(self, scene, selection: str = "power", sampling: str = "area"):
         self.scene = scene
         self.selection = selection
-        self.tables, self.owner = build_tables(scene, selection)
+        self.sampling = sampling
+        self.tables, self.owner = build_tables(scene, selection, sampling)
         self.pmf = self.tables.pmf
         self.count = len(self.pmf)
 
     def sample(self, u_select: np.ndarray, u_point: np.ndarray, x: np.ndarray,
                n: np.ndarray | None = None) -> LightSample:
-        """Sample a light for shading points ``x (n, 3)`` with normals ``n (n, 3)`` (unused by
-        today's techniques; default +z); ``u_select (n,)``, ``u_point (n, 2)``."""
+        """Sample a light for shading points ``x (n, 3)`` with unit normals ``n (n, 3)`` (used by
+        ``solid-angle-cos``; default +z); ``u_select (n,)``, ``u_point (n, 2)``."""
         normal = np.broadcast_to([0.0, 0.0, 1.0], x.shape) if n is None else n
         return LightSample(*_sample_lanes(self.tables, u_select, u_point, x, normal))
 
-    def pdf(self, x: np.ndarray, prim: np.ndarray, wi: np.ndarray, dist: np.ndarray) -> np.ndarray:
-        """Solid-angle pdf with which :meth:`sample` would pick, from ``x (n, 3)``, the direction
-        ``wi (n, 3)`` that hits triangle ``prim (n,)`` at distance ``dist (n,)``; 0 for
-        non-emitters and back sides."""
-        return _pdf_lanes(self.tables, x, prim, wi, dist)
+    def pdf(self, x: np.ndarray, prim: np.ndarray, wi: np.ndarray, dist: np.ndarray,
+            n: np.ndarray | None = None) -> np.ndarray:
+        """Solid-angle pdf with which :meth:`sample` would pick, from ``x (n, 3)`` with normals
+        ``n`` (default +z), the direction ``wi (n, 3)`` that hits primitive ``prim (n,)`` at
+        distance ``dist (n,)``; 0 for non-emitters and back sides."""
+        normal = np.broadcast_to([0.0, 0.0, 1.0], x.shape) if n is None else n
+        return _pdf_lanes(self.tables, x, normal, prim, wi, dist)
 
 
 @jit
@@ -208,15 +316,17 @@ def _sample_lanes(tables, u_select, u_point, x, normal):
 
 
 @jit
-def _pdf_lanes(tables, x, prim, wi, dist):
-    pmf, technique, rows, candidate_of_triangle = tables.pmf, tables.technique, tables.rows, \
-        tables.candidate_of_triangle
+def _pdf_lanes(tables, x, normal, prim, wi, dist):
+    pmf, technique, rows, candidate_of_prim = tables.pmf, tables.technique, tables.rows, \
+        tables.candidate_of_prim
     out = np.empty(len(prim))
     for i in range(len(prim)):
-        out[i] = pdf(pmf, technique, rows, candidate_of_triangle, (x[i, 0], x[i, 1], x[i, 2]), prim[i],
-                     (wi[i, 0], wi[i, 1], wi[i, 2]), dist[i])
+        out[i] = pdf(pmf, technique, rows, candidate_of_prim, (x[i, 0], x[i, 1], x[i, 2]),
+                     (normal[i, 0], normal[i, 1], normal[i, 2]), prim[i], (wi[i, 0], wi[i, 1], wi[i, 2]),
+                     dist[i])
     return out
 
 
-__all__ = ["POINT", "SELECTIONS", "TECHNIQUES", "TRIANGLE_AREA", "LightSample", "LightSampler", "LightTables",
+__all__ = ["LIGHT_SAMPLINGS", "POINT", "SELECTIONS", "TECHNIQUES", "TRIANGLE_AREA", "LightSample",
+           "LightSampler", "LightTables",
            "build_tables", "may_reach", "pdf", "sample"]

@@ -13,22 +13,32 @@ from ..jit import jit
 MAX_SPHERES = 16  # more emitters than this share one bounding sphere (the test is per sphere)
 
 
-def emitter_spheres(corners: np.ndarray, group: np.ndarray, ray_epsilon: float) -> np.ndarray:
-    """``(S, 4)`` spheres (center, radius) around emitting triangles ``corners (T, 3, 3)``, one
-    per ``group`` (T,) id (an emissive shape), or one around them all when there are more than
-    ``MAX_SPHERES`` groups. Radii are padded by the scene's ray offset and 1e-6 relative, so
-    that float32 rays that hit an emitter for Embree always meet its sphere."""
-    groups = [np.flatnonzero(group == g) for g in np.unique(group)]
+def emitter_spheres(corners: np.ndarray, group: np.ndarray, ray_epsilon: float,
+                    spheres: np.ndarray | None = None, sphere_group: np.ndarray | None = None) -> np.ndarray:
+    """``(B, 4)`` spheres (center, radius) around emitting triangles ``corners (T, 3, 3)`` and
+    analytic sphere emitters ``spheres (S, 4)``, one per ``group`` / ``sphere_group`` id (an
+    emissive shape), or one around them all when there are more than ``MAX_SPHERES`` groups.
+    Radii are padded by the scene's ray offset and 1e-6 relative, so that float32 rays that hit
+    an emitter for Embree (or for the sphere test) always meet its bounding sphere."""
+    spheres = np.zeros((0, 4)) if spheres is None else spheres
+    sphere_group = np.zeros(0, dtype=np.int64) if sphere_group is None else sphere_group
+    n_tri = len(corners)
+    owner = np.concatenate([group, sphere_group]).astype(np.int64)
+    groups = [np.flatnonzero(owner == g) for g in np.unique(owner)]
     if len(groups) > MAX_SPHERES:
-        groups = [np.arange(len(group))]
-    spheres = np.zeros((len(groups), 4))
-    for row, tri in enumerate(groups):
-        points = corners[tri].reshape(-1, 3)
-        center = 0.5 * (points.min(axis=0) + points.max(axis=0))
-        radius = np.sqrt(np.max(np.sum((points - center) ** 2, axis=1)))
-        spheres[row, :3] = center
-        spheres[row, 3] = radius * (1.0 + 1e-6) + ray_epsilon + 1e-6 * np.max(np.abs(center))
-    return spheres
+        groups = [np.arange(len(owner))]
+    out = np.zeros((len(groups), 4))
+    for row, members in enumerate(groups):
+        points = corners[members[members < n_tri]].reshape(-1, 3)
+        balls = spheres[members[members >= n_tri] - n_tri]
+        lo = np.min(np.concatenate([points, balls[:, :3] - balls[:, 3:]]), axis=0)
+        hi = np.max(np.concatenate([points, balls[:, :3] + balls[:, 3:]]), axis=0)
+        center = 0.5 * (lo + hi)
+        radius = max(np.sqrt(np.max(np.sum((points - center) ** 2, axis=1), initial=0.0)),
+                     np.max(np.linalg.norm(balls[:, :3] - center, axis=1) + balls[:, 3], initial=0.0))
+        out[row, :3] = center
+        out[row, 3] = radius * (1.0 + 1e-6) + ray_epsilon + 1e-6 * np.max(np.abs(center))
+    return out
 
 
 @jit

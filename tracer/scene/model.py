@@ -1,9 +1,12 @@
 """The scene model: what every scene reader produces and the renderer reads.
 
-Everything becomes triangles (quads split in two, spheres tessellated, meshes as read), so
-one Embree mesh holds the whole scene and per-triangle arrays hold what shading needs. Each
-shape keeps its record as the file gave it (a sphere's centre and radius, a quad's corners),
-so that light techniques that sample a shape as a whole can find it.
+Two kinds of primitive. Triangles (quads split in two, meshes as read, spheres given
+``subdivisions``) go into one Embree mesh, with per-triangle arrays for what shading needs.
+Analytic spheres (a ``sphere`` without ``subdivisions``) are intersected exactly by tracer's
+own compiled code (``tracer.geometry``). Primitive ids number the triangles 0 .. F - 1 and the
+spheres F .. F + S - 1; the hit table has one row per primitive. Each shape keeps its record
+as the file gave it (a sphere's centre and radius, a quad's corners), so that light techniques
+that sample a shape as a whole (a rectangle, a sphere) can find it.
 """
 
 from __future__ import annotations
@@ -28,7 +31,9 @@ class Shape:
     """One shape of the scene as its file gave it.
 
     type : ``quad``, ``sphere`` or ``mesh``.
-    first, count : its triangles are ``first .. first + count - 1`` of the scene's.
+    first, count : its triangles are ``first .. first + count - 1`` of the scene's (count 0
+        for an analytic sphere).
+    sphere : the analytic sphere's row in the scene's sphere arrays, -1 if it has triangles.
     material : row in the material table (0: black).   emission : (3,) radiance from its front.
     record : what defines it: quad ``origin, edge1, edge2``; sphere ``center, radius,
         subdivisions``; mesh ``file``.
@@ -40,6 +45,7 @@ class Shape:
     material: int
     emission: np.ndarray
     record: dict[str, Any] = field(default_factory=dict)
+    sphere: int = -1
 
     @property
     def emissive(self) -> bool:
@@ -60,9 +66,12 @@ class Scene:
     materials : the material table (``tracer.materials``).
     point_position, point_intensity : (P, 3) float64 (rounded to float32); intensity in W/sr.
     render_defaults : the file's ``[render]`` settings (``spp``, ``strategy``).
+    spheres : (S, 4) float64 analytic spheres, centre and radius (rounded to float32, as the
+        light table stores them).   sphere_material : (S,) int32.   sphere_emission : (S, 3)
+        radiance leaving the outside.   shape_of_sphere : (S,) int32 index into ``shapes``.
 
     Derived on construction: ``v0, edge1, edge2, normal`` (F, 3), ``area`` (F,),
-    ``hit_table`` (F, 16), ``ray_epsilon``.
+    ``hit_table`` (F + S, 16), ``ray_epsilon``.
     """
 
     path: str
@@ -77,6 +86,10 @@ class Scene:
     point_position: np.ndarray
     point_intensity: np.ndarray
     render_defaults: dict[str, Any] = field(default_factory=dict)
+    spheres: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    sphere_material: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int32))
+    sphere_emission: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    shape_of_sphere: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int32))
 
     def __post_init__(self) -> None:
         # Vertices at float32 precision, as Embree holds them: hit points, light samples and pdfs
@@ -91,16 +104,24 @@ class Scene:
         self.area = 0.5 * length
         # Zero-area triangles get a zero normal (and zero area): never sampled, shaded black.
         self.normal = cross / np.where(length > 0.0, length, 1.0)[:, None]
-        # What a hit needs, in one row per triangle so that a batch gathers it in one go:
-        # v0 (3), edge1 (3), edge2 (3), normal (3), emission (3), material row (1).
-        self.hit_table = np.ascontiguousarray(np.concatenate(
-            [self.v0, self.edge1, self.edge2, self.normal, self.emission, self.material[:, None]], axis=1))
+        self.spheres = np.asarray(self.spheres, dtype=np.float32).astype(np.float64).reshape(-1, 4)
+        # What a hit needs, in one row per primitive so that a batch gathers it in one go:
+        # triangles v0 (3), edge1 (3), edge2 (3), normal (3); spheres centre (3), radius (1),
+        # zeros (5), and a zero normal, which marks the row as a sphere's; then for both
+        # emission (3) and material row (1).
+        triangles = np.concatenate([self.v0, self.edge1, self.edge2, self.normal, self.emission,
+                                    self.material[:, None]], axis=1)
+        spheres = np.zeros((len(self.spheres), 16))
+        spheres[:, 0:4] = self.spheres
+        spheres[:, 12:15] = self.sphere_emission
+        spheres[:, 15] = self.sphere_material
+        self.hit_table = np.ascontiguousarray(np.concatenate([triangles, spheres]))
         # float32 rounding in Embree scales with the magnitude of the coordinates a ray starts
         # from, which are the geometry's (hit points) and never the camera's (camera rays start
         # at the camera, with no offset): an offset proportional to the geometry's extent makes
         # a scene scaled by 1e-3 or 1e3 render the same image, wherever the camera is.
-        points = np.concatenate([self.vertices, self.point_position]) if len(self.point_position) \
-            else self.vertices
+        center, radius = self.spheres[:, :3], self.spheres[:, 3:]
+        points = np.concatenate([self.vertices, self.point_position, center - radius, center + radius])
         extent = 0.0
         if len(points):
             lo, hi = points.min(axis=0), points.max(axis=0)
@@ -138,12 +159,23 @@ class Scene:
         add("material_params", self.materials.params, "<f8")
         add("point_position", self.point_position, "<f4")
         add("point_intensity", self.point_intensity, "<f4")
+        if len(self.spheres):  # only then, so that the digests of scenes without them stay as they were
+            add("spheres", self.spheres, "<f4")
+            add("sphere_material", self.sphere_material, "<i4")
+            add("sphere_emission", self.sphere_emission, "<f4")
+            add("shape_of_sphere", self.shape_of_sphere, "<i4")
         return digest.hexdigest()
 
     @property
     def has_lights(self) -> bool:
         """Whether anything emits: a shape with emission or a point light with intensity."""
-        return bool(np.any(self.emission > 0.0)) or bool(np.any(self.point_intensity > 0.0))
+        return (bool(np.any(self.emission > 0.0)) or bool(np.any(self.sphere_emission > 0.0))
+                or bool(np.any(self.point_intensity > 0.0)))
+
+    @property
+    def triangle_count(self) -> int:
+        """F: primitive ids below it are triangles, from it on analytic spheres."""
+        return len(self.faces)
 
     @property
     def light_of_triangle(self) -> np.ndarray:

@@ -21,7 +21,7 @@ from .. import materials
 from ..camera import Camera
 from ..errors import InputError
 from ..record import MAX_SAMPLE_INDEX
-from ..strategy import STRATEGIES
+from ..strategy import LIGHT_SAMPLINGS, STRATEGIES
 from .icosphere import unit_icosphere
 from .model import Scene, Shape
 
@@ -119,6 +119,10 @@ def scene_from_document(doc: Any, path: str, base: Path, width: int | None = Non
         point_position=_float32(point_position),
         point_intensity=_float32(point_intensity),
         render_defaults=render,
+        spheres=np.array(geometry.spheres, dtype=np.float64).reshape(-1, 4),
+        sphere_material=np.array(geometry.sphere_material, dtype=np.int32),
+        sphere_emission=np.array(geometry.sphere_emission, dtype=np.float64).reshape(-1, 3),
+        shape_of_sphere=np.array(geometry.shape_of_sphere, dtype=np.int32),
     )
 
 
@@ -255,6 +259,8 @@ def _read_render(r: _Reader) -> dict[str, Any]:
         out["spp"] = r.number("spp", lo=1, hi=MAX_SAMPLE_INDEX, integer=True)
     if r.has("strategy"):
         out["strategy"] = r.string("strategy", STRATEGIES)
+    if r.has("light_sampling"):
+        out["light_sampling"] = r.string("light_sampling", LIGHT_SAMPLINGS)
     r.done()
     return out
 
@@ -319,6 +325,10 @@ class _Geometry:
         self.shapes: list[Shape] = []
         self._count = 0
         self._triangles = 0
+        self.spheres: list[list[float]] = []
+        self.sphere_material: list[int] = []
+        self.sphere_emission: list[np.ndarray] = []
+        self.shape_of_sphere: list[int] = []
 
     def add(self, shape_type: str, record: dict[str, Any], vertices: np.ndarray, faces: np.ndarray,
             material: int, emission: np.ndarray) -> None:
@@ -331,6 +341,14 @@ class _Geometry:
         self.shape.append(np.full(n, len(self.shapes), dtype=np.int32))
         self.shapes.append(Shape(shape_type, self._triangles, n, material, emission, record))
         self._triangles += n
+
+    def add_sphere(self, record: dict[str, Any], material: int, emission: np.ndarray) -> None:
+        self.spheres.append([*record["center"], record["radius"]])
+        self.sphere_material.append(material)
+        self.sphere_emission.append(emission)
+        self.shape_of_sphere.append(len(self.shapes))
+        self.shapes.append(Shape("sphere", self._triangles, 0, material, emission, record,
+                                 sphere=len(self.spheres) - 1))
 
     def vertices(self) -> np.ndarray:
         return np.concatenate(self._vertices) if self._vertices else np.zeros((0, 3))
@@ -371,7 +389,11 @@ def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Ge
         if radius < 1e-6 * max(float(np.max(np.abs(center))), 1e-24):
             r.fail(f"radius {radius:g} is below what float32 resolves at the centre "
                    f"(at least 1e-6 times the largest centre coordinate, and 1e-30)", "radius")
-        subdivisions = r.number("subdivisions", default=3, lo=0, hi=7, integer=True)
+        if not r.has("subdivisions"):  # a true sphere, intersected exactly
+            r.done()
+            geometry.add_sphere({"center": center, "radius": radius}, material, emission)
+            return
+        subdivisions = r.number("subdivisions", lo=0, hi=7, integer=True)
         record = {"center": center, "radius": radius, "subdivisions": subdivisions}
         vertices, faces = _icosphere(subdivisions, radius, center)
     else:

@@ -85,7 +85,7 @@ from ..film import Film, merge_renders
 from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
 from ..render_loop import RenderSettings, render_complete
 from ..scene import Scene, default_scene_path, load_scene
-from ..strategy import HEURISTICS, STRATEGIES, Strategy
+from ..strategy import DEFAULT_LIGHT_SAMPLING, HEURISTICS, LIGHT_SAMPLINGS, STRATEGIES, Strategy
 from . import metrics, statistics
 from .compare import scene_for_reference
 from .statistics import FAMILY_ALPHA
@@ -118,6 +118,7 @@ class Entry:
     heuristic: str = "power"
     light_samples: int = 1
     bsdf_samples: int = 1
+    light_sampling: str = DEFAULT_LIGHT_SAMPLING
     downsample: int = 4
     pixel_test: bool = True
     reference: str | None = None
@@ -131,17 +132,22 @@ class Entry:
     @property
     def name(self) -> str:
         label = self.strategy if self.strategy != "mis" else f"mis-{self.heuristic}"
+        if self.light_sampling != DEFAULT_LIGHT_SAMPLING:
+            label += f"-{self.light_sampling}"
         return f"{self.scene}/{label}"
 
     def strategy_object(self) -> Strategy:
-        return Strategy(self.strategy, self.heuristic, self.light_samples, self.bsdf_samples)
+        return Strategy(self.strategy, self.heuristic, self.light_samples, self.bsdf_samples,
+                        light_sampling=self.light_sampling)
 
     def reference_key(self) -> str:
         """The reference file, relative to the baseline's folder."""
         return self.reference or f"references/{self.scene}.exr"
 
     def to_json(self) -> dict[str, Any]:
-        return {k: v for k, v in self.__dict__.items() if v is not None and v != ""}
+        # The default light sampling is left out, so that baselines of tracer 0.2 stay as they were.
+        return {k: v for k, v in self.__dict__.items() if v is not None and v != ""
+                and not (k == "light_sampling" and v == DEFAULT_LIGHT_SAMPLING)}
 
 
 @dataclass
@@ -279,6 +285,8 @@ def _field_problem(name: str, value: Any, raw: dict[str, Any]) -> str | None:
         return None if value in STRATEGIES else f"one of {', '.join(STRATEGIES)}"
     if name == "heuristic":
         return None if value in HEURISTICS else f"one of {', '.join(HEURISTICS)}"
+    if name == "light_sampling":
+        return None if value in LIGHT_SAMPLINGS else f"one of {', '.join(LIGHT_SAMPLINGS)}"
     if name == "spp":
         return None if _is_int(value, 1, 2**31) else "a whole number of samples >= 1"
     if name in ("light_samples", "bsdf_samples"):

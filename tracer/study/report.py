@@ -56,12 +56,18 @@ def _pyplot():
 
 
 def run_name(run: Run) -> str:
-    """A file-name-safe label: ``mis``, ``mis_l3_b1``, ``light_x4`` ..."""
+    """A file-name-safe label: ``mis``, ``mis_l3_b1``, ``light_x4``, ``light_solid-angle`` ..."""
+    from ..strategy import DEFAULT_LIGHT_SAMPLING
+
     s = run.strategy
-    if s.name == "mis" and (s.light_samples, s.bsdf_samples) != (1, 1):
-        return f"mis_l{s.light_samples}_b{s.bsdf_samples}"
     count = s.light_count or s.direction_count
-    return s.name if count == 1 else f"{s.name}_x{count}"
+    if s.name == "mis" and (s.light_samples, s.bsdf_samples) != (1, 1):
+        name = f"mis_l{s.light_samples}_b{s.bsdf_samples}"
+    else:
+        name = s.name if count == 1 else f"{s.name}_x{count}"
+    if s.light_count and s.light_sampling != DEFAULT_LIGHT_SAMPLING:
+        name += f"_{s.light_sampling}"
+    return name
 
 
 # ---------------------------------------------------------------------------------------------

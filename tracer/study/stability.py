@@ -38,6 +38,12 @@ from ..scene import Scene, load_scene
 from ..strategy import STRATEGIES, Strategy
 from . import metrics, statistics
 
+# The suite's columns: every strategy, then light and MIS with each solid-angle light sampling
+# (``tracer.lights``), as (column, strategy, light sampling).
+COLUMNS = tuple((name, name, "area") for name in STRATEGIES) + tuple(
+    (f"{name}_{sampling}", name, sampling) for name in ("light", "mis")
+    for sampling in ("solid-angle", "solid-angle-cos"))
+COLUMN_NAMES = tuple(column for column, _, _ in COLUMNS)
 SIZE = 32
 SPP = 64
 REFERENCE_SPP = 1024
@@ -71,8 +77,9 @@ class Case:
     def path(self) -> Path:
         return CASE_DIR / f"{self.scene or self.name}.toml"
 
-    def strategy(self, name: str, heuristic: str = "power") -> Strategy:
-        return Strategy(name, heuristic, self.light_samples, self.bsdf_samples)
+    def strategy(self, name: str, heuristic: str = "power", light_sampling: str = "area") -> Strategy:
+        return Strategy(name, heuristic, self.light_samples, self.bsdf_samples,
+                        light_sampling=light_sampling)
 
 
 def cases(size: int = SIZE) -> list[Case]:
@@ -80,6 +87,8 @@ def cases(size: int = SIZE) -> list[Case]:
     hemisphere = ("uniform", "cosine", "bsdf")  # the strategies that cannot hit a point light
     out = [
         Case("tiny_light", "sphere light of radius 1e-3", veach="light"),
+        Case("tiny_sphere_light", "true sphere light of radius 1e-3 (a cone of 1e-6 sr)", veach="light"),
+        Case("inside_sphere_light", "shading points inside a sphere light (it gives 0 there)"),
         Case("big_light", "an emitter filling most of the hemisphere",
              testable=STRATEGIES, veach="bsdf"),
         Case("grazing_light", "light arriving at grazing angles",
@@ -151,14 +160,14 @@ def run_case(
         scene, Strategy("mis"), RenderSettings(spp=reference_spp, seed=seed + 1_000_000, threads=threads)
     ).film
     cells = []
-    for name in STRATEGIES:
+    for column, name, sampling in COLUMNS:
         settings = RenderSettings(spp=spp, seed=seed, threads=threads)
-        result = render_complete(scene, case.strategy(name), settings)
+        result = render_complete(scene, case.strategy(name, light_sampling=sampling), settings)
         film = result.film
         cells.append(
             Cell(
                 case=case.name,
-                strategy=name,
+                strategy=column,
                 relmse=metrics.relmse(film.mean, reference.mean),
                 z=_image_mean_z(film, reference),
                 nonfinite=result.nonfinite,
@@ -290,12 +299,12 @@ def format_table(cells: list[Cell]) -> str:
     """Strategy x case table: relMSE / bias z / NaN+Inf count / seconds per cell."""
     names = list(dict.fromkeys(c.case for c in cells))
     width = max(len(n) for n in names)
-    head = f"{'case':<{width}}  " + "  ".join(f"{s:>27}" for s in STRATEGIES)
-    lines = [head, f"{'':<{width}}  " + "  ".join(f"{'relMSE     z  bad      s':>27}" for _ in STRATEGIES)]
+    head = f"{'case':<{width}}  " + "  ".join(f"{s:>27}" for s in COLUMN_NAMES)
+    lines = [head, f"{'':<{width}}  " + "  ".join(f"{'relMSE     z  bad      s':>27}" for _ in COLUMN_NAMES)]
     for name in names:
         row = {c.strategy: c for c in cells if c.case == name}
         parts = []
-        for s in STRATEGIES:
+        for s in COLUMN_NAMES:
             c = row[s]
             if c.blind:
                 parts.append(f"{'blind (' + ('zero' if c.zero else 'NOT ZERO') + ')':>27}")
@@ -313,15 +322,15 @@ def heat_map(cells: list[Cell], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     names = list(dict.fromkeys(c.case for c in cells))
-    grid = np.full((len(names), len(STRATEGIES)), np.nan)
-    fig, ax = plt.subplots(figsize=(9, 0.5 * len(names) + 2))
+    grid = np.full((len(names), len(COLUMN_NAMES)), np.nan)
+    fig, ax = plt.subplots(figsize=(14, 0.5 * len(names) + 2.4))
     for c in cells:
-        i, j = names.index(c.case), STRATEGIES.index(c.strategy)
+        i, j = names.index(c.case), COLUMN_NAMES.index(c.strategy)
         if not c.blind:
             grid[i, j] = np.log10(max(c.relmse, 1e-12))
     im = ax.imshow(grid, cmap="magma_r", vmin=-6, vmax=2, aspect="auto")
     for c in cells:
-        i, j = names.index(c.case), STRATEGIES.index(c.strategy)
+        i, j = names.index(c.case), COLUMN_NAMES.index(c.strategy)
         if c.blind:
             # facecolor and edgecolor apart: ``color`` set both, and the hatch (drawn in the edge
             # colour) vanished into the face.
@@ -334,7 +343,7 @@ def heat_map(cells: list[Cell], path: Path) -> None:
             ax.text(
                 j, i, f"{c.relmse:.2g}\nz {c.z:+.1f}{bad}", ha="center", va="center", fontsize=7, color=color
             )
-    ax.set_xticks(range(len(STRATEGIES)), STRATEGIES)
+    ax.set_xticks(range(len(COLUMN_NAMES)), [n.replace("_", "\n") for n in COLUMN_NAMES], fontsize=8)
     ax.set_yticks(range(len(names)), names, fontsize=8)
     ax.set_title("relMSE per strategy and case (z: bias of the image mean, in standard errors)", fontsize=10)
     fig.colorbar(im, ax=ax, label="log10 relMSE", fraction=0.04)
