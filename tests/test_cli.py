@@ -569,3 +569,49 @@ def test_default_names_tell_settings_apart_and_the_summary_says_them(tmp_path, m
     dark.write_text(DARK)
     assert main(["render", str(dark), "--spp", "1", "--quiet"]) == 0
     assert "has no lights" in capsys.readouterr().err
+
+
+def test_light_sampling_from_the_command_line_and_the_scene(tmp_path, monkeypatch, capsys):
+    """--light-sampling reaches the render (its record and default name say it), a scene's
+    [render] light_sampling is the default that the flag overrides, strategies without light
+    samples record none, and a bad name is one line with exit status 2."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    with_default = tmp_path / "d.toml"
+    with_default.write_text('[render]\nlight_sampling = "solid-angle-cos"\n' + GOOD)
+    monkeypatch.chdir(tmp_path)
+    assert main(["render", str(scene), "--spp", "1", "--quiet", "--light-sampling", "solid-angle"]) == 0
+    assert read_exr(tmp_path / "s_mis_solid-angle.exr").record.light_sampling == "solid-angle"
+    assert main(["render", str(with_default), "--spp", "1", "--quiet"]) == 0
+    assert read_exr(tmp_path / "d_mis_solid-angle-cos.exr").record.light_sampling == "solid-angle-cos"
+    assert main(["render", str(with_default), "--spp", "1", "--quiet", "--light-sampling", "area"]) == 0
+    assert read_exr(tmp_path / "d_mis.exr").record.light_sampling == "area"
+    assert main(["render", str(scene), "--spp", "1", "--quiet", "--strategy", "bsdf"]) == 0
+    assert read_exr(tmp_path / "s_bsdf.exr").record.light_sampling == "none"
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_info:
+        main(["render", str(scene), "--light-sampling", "cone"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--light-sampling" in err[0] and "cone" in err[0]
+
+
+def test_files_without_light_sampling_pool_as_area_sampled(tmp_path):
+    """A render of tracer 0.2 has no tracer:light_sampling; it sampled lights by area, so it
+    pools with an area render of this version and is refused with a solid-angle one, naming
+    the field."""
+    import dataclasses
+
+    from tracer.errors import InputError
+    from tracer.record import check_mergeable
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    assert main(["render", str(scene), "--spp", "1", "--quiet", "-o", str(tmp_path / "a.exr")]) == 0
+    assert main(["render", str(scene), "--spp", "1", "--quiet", "--seed", "1", "--light-sampling",
+                 "solid-angle", "-o", str(tmp_path / "b.exr")]) == 0
+    area, solid = read_exr(tmp_path / "a.exr").record, read_exr(tmp_path / "b.exr").record
+    old = dataclasses.replace(area, light_sampling=None, samples=((7, 0, 1),))
+    check_mergeable(old, area)
+    with pytest.raises(InputError, match="light_sampling"):
+        check_mergeable(old, solid)

@@ -613,3 +613,24 @@ def test_compare_sweep_over_seeds_with_vector_figures_on_the_cpu_clock(tmp_path,
     assert main([*common, "--figure-format", "pdf,eps", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "--figure-format: unknown format 'eps'" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_compare_takes_a_list_of_light_samplings(tmp_path):
+    """--light-sampling area,solid-angle compares each technique with every strategy that takes
+    light samples (once for those that do not): files named by technique, records that say it,
+    one metrics row each."""
+    scene = str(SCENES / "veach_mis.toml")
+    ref = tmp_path / "ref.exr"
+    assert main(["reference", scene, "-o", str(ref), "--width", "16", "--height", "16", "--spp", "16",
+                 "--quiet"]) == 0
+    out = tmp_path / "cmp"
+    assert main(["compare", scene, "--reference", str(ref), "--spp", "2", "--out", str(out), "--quiet",
+                 "--strategies", "light,bsdf", "--light-sampling", "area,solid-angle"]) == 0
+    rows = {r["name"] for r in json.loads((out / "metrics.json").read_text())["results"]}
+    assert rows == {"light", "light_solid-angle", "bsdf"}
+    assert read_exr(out / "light_solid-angle.exr").record.light_sampling == "solid-angle"
+    assert read_exr(out / "light.exr").record.light_sampling == "area"
+    assert read_exr(out / "bsdf.exr").record.light_sampling == "none"
+    # Where each technique wins: its efficiency map against the strategy's first technique.
+    assert (out / "efficiency_light_solid-angle_vs_light.png").is_file()
+    assert (out / "efficiency_bsdf_vs_light.png").is_file()

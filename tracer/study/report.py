@@ -537,11 +537,15 @@ def result_row(run: Run, flip: float) -> dict[str, Any]:
 
 
 def efficiency_pairs(runs: list[Run]) -> list[tuple[Run, Run]]:
-    """The strategy pairs whose ratio map is most telling: light vs BSDF (where each wins),
-    then MIS against each of them."""
-    by_name = {r.strategy.name: r for r in runs}
-    pairs = [("bsdf", "light"), ("mis", "light"), ("mis", "bsdf")]
-    return [(by_name[a], by_name[b]) for a, b in pairs if a in by_name and b in by_name]
+    """The pairs whose ratio map is most telling: light vs BSDF (where each wins), then MIS
+    against each of them (each strategy's first run), then every other light-sampling technique
+    of a strategy against its first (where solid angle beats area sampling, and where not)."""
+    first: dict[str, Run] = {}
+    for r in runs:
+        first.setdefault(r.strategy.name, r)
+    pairs = [(first[a], first[b]) for a, b in (("bsdf", "light"), ("mis", "light"), ("mis", "bsdf"))
+             if a in first and b in first]
+    return pairs + [(r, first[r.strategy.name]) for r in runs if r is not first[r.strategy.name]]
 
 
 def make_report(out: Path, scene_name: str, reference_path: str, reference: Film, runs: list[Run],
