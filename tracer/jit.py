@@ -5,7 +5,7 @@ The estimator runs loops over lanes in compiled code instead of ~100 whole-array
 
 - caching: compiled machine code is kept beside the sources (``__pycache__``), or under
   ``NUMBA_CACHE_DIR`` when that is set, else in the user's cache folder, so only the first run
-  after an install or an edit pays for compilation (about 20 s). If none of these folders is
+  after an install or an edit pays for compilation (about 50 s). If none of these folders is
   writable (a read-only install with no writable HOME), kernels are compiled in memory on each
   run and one note line on stderr says so; a damaged cache entry (a truncated or garbage
   ``.nbi`` index or ``.nbc`` data file) is a cache miss: recompiled and rewritten, with one note;
@@ -220,7 +220,7 @@ def _tolerant_cache_class():
                 super().save_overload(sig, data)
             except Exception as exc:
                 _note("uncacheable", f"cannot cache compiled kernels (writing to {self.cache_path} "
-                                     f"failed: {_describe(exc)}); compiling each run (~20 s)")
+                                     f"failed: {_describe(exc)}); compiling each run (~50 s)")
 
     return TracerFunctionCache
 
@@ -244,7 +244,7 @@ def _attach_cache(dispatcher) -> None:
     except Exception as exc:  # RuntimeError from numba: no locator, i.e. no writable folder
         why = _why_unwritable(refusals) if isinstance(exc, RuntimeError) else _describe(exc)
         _note("uncacheable", f"cannot cache compiled kernels ({why}); compiling each run "
-                             "(~20 s); set NUMBA_CACHE_DIR to a writable folder to keep them")
+                             "(~50 s); set NUMBA_CACHE_DIR to a writable folder to keep them")
         return
     finally:
         _REFUSALS.log = None
