@@ -139,3 +139,13 @@ def test_a_signal_during_the_trimesh_import_is_not_swallowed(monkeypatch):
     monkeypatch.setattr(builtins, "__import__", swallowing_import)
     with pytest.raises(KeyboardInterrupt):
         toml_reader.import_trimesh()
+
+
+def test_render_refuses_a_light_sampling_that_is_not_a_name():
+    """light_sampling="" or False is a mistake, not a request for the default: ValueError
+    naming the option (None, the default, takes the scene's or tracer's default)."""
+    scene = tracer.load_scene(default_scene_path(), width=4, height=4)
+    for bad in ("", False, 0, "AREA"):
+        with pytest.raises(ValueError, match="light sampling"):
+            tracer.render(scene, "mis", spp=1, light_sampling=bad)
+    assert tracer.render(scene, "light", spp=1).film.record.light_sampling == "area"

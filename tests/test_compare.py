@@ -631,6 +631,10 @@ def test_compare_takes_a_list_of_light_samplings(tmp_path):
     assert read_exr(out / "light_solid-angle.exr").record.light_sampling == "solid-angle"
     assert read_exr(out / "light.exr").record.light_sampling == "area"
     assert read_exr(out / "bsdf.exr").record.light_sampling == "none"
+    # metrics.csv tells the runs apart too, by name and by light sampling.
+    csv_rows = (out / "metrics.csv").read_text().splitlines()
+    assert csv_rows[0].startswith("name,strategy,") and "light_sampling" in csv_rows[0]
+    assert sorted(line.split(",")[0] for line in csv_rows[1:]) == ["bsdf", "light", "light_solid-angle"]
     # Where each technique wins: its efficiency map against the strategy's first technique.
     assert (out / "efficiency_light_solid-angle_vs_light.png").is_file()
     assert (out / "efficiency_bsdf_vs_light.png").is_file()

@@ -90,7 +90,8 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     if not isinstance(strategy, Strategy):
-        sampling = light_sampling or scene.render_defaults.get("light_sampling") or DEFAULT_LIGHT_SAMPLING
+        sampling = light_sampling if light_sampling is not None else \
+            scene.render_defaults.get("light_sampling", DEFAULT_LIGHT_SAMPLING)
         strategy = Strategy(strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection,
                             sampling)
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:

@@ -153,8 +153,10 @@ def pdf(pmf, technique, rows, candidate_of_prim, x, n, prim: int, wi, dist: floa
 
 def _rectangles(scene, tri: np.ndarray) -> tuple[list[int], np.ndarray]:
     """The emitting quads among ``scene.shapes`` that are rectangles with both triangles in
-    ``tri``: their shape indices and ``(Q, 3, 3)`` corner, edge u, edge v (float32-rounded, as
-    the triangles Embree intersects)."""
+    ``tri``: their shape indices and ``(Q, 3, 3)`` corner, edge u, edge v, taken from the quad's
+    float32 vertices (o, o + e1, o + e1 + e2, o + e2), so that the rectangle sampled is the one
+    Embree intersects (float32(o) + float32(e1) can differ from float32(o + e1): a light
+    0.00013 wide at x = 1000 was 6% wider that way)."""
     in_table = set(tri.tolist())
     found, frames = [], []
     for index, shape in enumerate(scene.shapes):
@@ -162,9 +164,10 @@ def _rectangles(scene, tri: np.ndarray) -> tuple[list[int], np.ndarray]:
             continue
         if shape.first not in in_table or shape.first + 1 not in in_table:
             continue
-        corner = np.asarray(shape.record["origin"], dtype=np.float32).astype(np.float64)
-        e1 = np.asarray(shape.record["edge1"], dtype=np.float32).astype(np.float64)
-        e2 = np.asarray(shape.record["edge2"], dtype=np.float32).astype(np.float64)
+        first, second = scene.faces[shape.first], scene.faces[shape.first + 1]  # (0, 1, 2), (0, 2, 3)
+        corner = scene.vertices[first[0]]
+        e1 = scene.vertices[first[1]] - corner
+        e2 = scene.vertices[second[2]] - corner
         if abs(np.dot(e1, e2)) <= RECTANGLE_TOLERANCE * np.linalg.norm(e1) * np.linalg.norm(e2):
             found.append(index)
             frames.append([corner, e1, e2])

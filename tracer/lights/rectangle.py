@@ -9,8 +9,12 @@ directions w_c, placed at the corners of the square that the map sends to them; 
 (Physically Based Rendering 4th ed., sec. 6.6.4, bilinear patches that are rectangles) does the
 same, and its pdf for a given direction needs the inverse map.
 
-As in pbrt-v4, rectangles that subtend less than ``MIN_SOLID_ANGLE`` or more than
-``MAX_SOLID_ANGLE`` sr are sampled uniformly by area instead (sample and pdf choose alike).
+As in pbrt-v4, rectangles that subtend less than ``MIN_SOLID_ANGLE`` sr are sampled uniformly
+by area instead (sample and pdf choose alike). Unlike pbrt-v4, nearly hemispherical ones (over
+6.22 sr, a shading point close under a large light) are not: ``spherical_rectangle`` stays
+accurate up to 2 pi (tested to 2 pi - 6e-12), while area sampling of such a light is hopeless
+(a 2000 x 2000 light 1 above the floor: a 16-spp image mean 64% low with a tiny standard
+error, the rare close samples that carry the integral not drawn).
 
 =========  =======  ============================================
 column     size     what
@@ -38,7 +42,6 @@ NAME = "rectangle"
 CORNER, EDGE_U, EDGE_V, NORMAL, EMISSION, INV_AREA = 0, 3, 6, 9, 12, 15
 WIDTH = 16
 MIN_SOLID_ANGLE = 1e-4
-MAX_SOLID_ANGLE = 6.22
 
 
 def rows(frames: np.ndarray, emission: np.ndarray) -> np.ndarray:
@@ -92,7 +95,7 @@ def sample(rows, k: int, x, n, cos_warp: bool, u0: float, u1: float):
     with pdf in solid angle; 0 for the back side."""
     corner, eu, ev, normal = _frame(rows, k)
     omega = spherical_rectangle.solid_angle(x, corner, eu, ev)
-    if not (MIN_SOLID_ANGLE < omega < MAX_SOLID_ANGLE):
+    if not omega > MIN_SOLID_ANGLE:
         point = add_scaled(add_scaled(corner, u0, eu), u1, ev)
         wi, d, le, _ = _toward(rows, k, x, point, normal, 1.0)
         cos_light = -dot(normal, wi)
@@ -115,7 +118,7 @@ def pdf(rows, k: int, x, n, cos_warp: bool, wi, dist: float) -> float:
     if not cos_light > 0.0:
         return 0.0
     omega = spherical_rectangle.solid_angle(x, corner, eu, ev)
-    if not (MIN_SOLID_ANGLE < omega < MAX_SOLID_ANGLE):
+    if not omega > MIN_SOLID_ANGLE:
         return rows[k, INV_AREA] * dist * dist / cos_light
     if not cos_warp:
         return 1.0 / omega

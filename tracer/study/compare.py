@@ -545,6 +545,7 @@ def run_row(run: Run) -> dict[str, object]:
     row: dict[str, object] = {"strategy": run.strategy.name, "heuristic": run.strategy.recorded_heuristic,
                               "light_samples": run.strategy.light_count,
                               "bsdf_samples": run.strategy.direction_count,
+                              "light_sampling": run.strategy.recorded_light_sampling,
                               "spp": run.spp, "seconds": run.seconds, "clock": run.clock,
                               "wall_seconds": run.wall_seconds, "cpu_seconds": run.cpu_seconds}
     row.update(run.measures)
