@@ -228,10 +228,13 @@ def on_the_quad(scene, s, pdf_of_direction, x: np.ndarray):
 
     def inverse(y):
         # A sample at an edge of the light can land a hair outside it: one in 400,000 of the
-        # parallelogram's spherical-triangle samples fell 3.5e-8 of an edge's length outside
-        # (a direction off by 2e-8 rad, about sqrt(eps): a step of Arvo's map that loses half
-        # the digits near the arc's end; not found yet). Within 1e-7 it counts as on the light;
-        # anything farther goes to the rest cell, which expects nothing, and fails the test.
+        # parallelogram's spherical-triangle samples (u1 = 1 - 1.2e-8, on the edge) fell
+        # 3.5e-8 of an edge's length outside. Its direction differs by 2e-8 rad from what
+        # spherical_triangle.sample returns for the same u when called alone, so the map
+        # amplifies last-bit differences there to about sqrt(eps); the light table's float32
+        # normal was ruled out (finding the plane from the exact vertices changed nothing).
+        # Within 1e-7 it counts as on the light; anything farther goes to the rest cell, which
+        # expects nothing, and fails the test.
         p = (y - o) @ to_params.T
         inside = np.clip(p, 0.0, 1.0)
         return np.where(np.abs(p - inside) < 1e-7, inside, p)

@@ -241,9 +241,9 @@ def build_tables(scene, light_selection: str = "power",
         candidate_of_prim[scene.shapes[q].first:scene.shapes[q].first + 2] = first_quad + i
     candidate_of_prim[first_prim_sphere + sph] = np.arange(first_sphere, first_point, dtype=np.int32)
 
-    # Bounding spheres for the culling of direction rays: one per emissive shape.
-    emit_tri = tri  # the quads' triangles bound the rectangles exactly
-    spheres = emitter_spheres(scene.vertices[scene.faces[emit_tri]], scene.shape_of_triangle[emit_tri],
+    # Bounding spheres for the culling of direction rays: one per emissive shape (a rectangle's
+    # two triangles bound it exactly).
+    spheres = emitter_spheres(scene.vertices[scene.faces[tri]], scene.shape_of_triangle[tri],
                               scene.ray_epsilon, scene.spheres[sph], scene.shape_of_sphere[sph])
     tables = LightTables(alias_prob, alias, pmf, technique, np.ascontiguousarray(rows),
                          candidate_of_prim, spheres)
