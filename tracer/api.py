@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from .film import Film
+from .samplers import DEFAULT_SAMPLER, SAMPLERS
 from .scene import Scene, load_scene
 from .strategy import DEFAULT_LIGHT_SAMPLING, Strategy
 
@@ -72,7 +73,7 @@ class Image:
 def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str | Strategy = "mis",
            spp: int = 64, seed: int = 0, *, threads: int | None = None, heuristic: str = "power",
            light_samples: int = 1, bsdf_samples: int = 1, one_sample: bool = False,
-           light_selection: str = "power", light_sampling: str | None = None, sampler: str = "independent",
+           light_selection: str = "power", light_sampling: str | None = None, sampler: str | None = None,
            progress: bool = False) -> Image:
     """Render ``scene`` (a :class:`Scene`, or a path or dict for :func:`load_scene`) with
     ``spp`` samples per pixel.
@@ -81,6 +82,8 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
         (then the keyword options heuristic ... light_sampling are ignored).
     light_sampling : ``area``, ``solid-angle`` or ``solid-angle-cos`` (default: the scene's
         ``[render] light_sampling``, else ``Strategy``'s default).
+    sampler : ``independent``, ``stratified`` or ``sobol`` (default: the scene's ``[render]
+        sampler``, else ``independent``); the variance is honest for each (``tracer.film``).
     seed : the same seed gives the same bits whatever ``threads`` (default: all cores).
     Raises ``ValueError`` for a bad option and ``tracer.errors.InputError`` for a bad scene.
     """
@@ -98,6 +101,9 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
         raise ValueError(f"spp must be a whole number >= 1, got {spp!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a whole number >= 0, got {seed!r}")
+    sampler = sampler if sampler is not None else scene.render_defaults.get("sampler", DEFAULT_SAMPLER)
+    if sampler not in SAMPLERS:
+        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}, got {sampler!r}")
     settings = RenderSettings(spp=int(spp), seed=int(seed), threads=threads or os.cpu_count() or 1,
                               sampler=sampler)
     result = render_film(scene, strategy, settings, progress=progress)

@@ -91,8 +91,7 @@ def _lane_directions(sampler, pixel, sample, width, height, tan_half, f, r, u) -
     for i in range(len(pixel)):
         p = pixel[i]
         state = samplers.start(sampler, p, sample[i])
-        d[i, 0], d[i, 1], d[i, 2] = _direction(
-            (p % width) + samplers.uniform(sampler, state, dimensions.CAMERA_JITTER),
-            (p // width) + samplers.uniform(sampler, state, dimensions.CAMERA_JITTER + 1),
-            width, height, tan_half, f, r, u)
+        jitter = samplers.uniform_pair(sampler, state, dimensions.CAMERA_JITTER)
+        d[i, 0], d[i, 1], d[i, 2] = _direction((p % width) + jitter[0], (p // width) + jitter[1],
+                                               width, height, tan_half, f, r, u)
     return d

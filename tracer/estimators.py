@@ -231,11 +231,10 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
 
         # Light samples: f Le |cos| w_l / (own p_l); other = 0 (no direction technique) gives weight 1.
         for j in range(lights_here):
-            dim = dimensions.light_point(j)
+            u = samplers.uniform_pair(sampler, state, dimensions.light_point(j))
             wi_world, dist, le, pdf_light, delta = lights.sample(
                 alias_prob, alias, pmf, technique, rows, x, normal,
-                samplers.uniform(sampler, state, dimensions.light_choice(j)),
-                samplers.uniform(sampler, state, dim), samplers.uniform(sampler, state, dim + 1))
+                samplers.uniform(sampler, state, dimensions.light_choice(j)), u[0], u[1])
             if not pdf_light > 0.0:
                 continue
             wi = to_local(s, t, normal, wi_world)
@@ -257,11 +256,10 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         # Direction samples: f |cos| / (own p_d); _gather multiplies in the emitter it hits and
         # the MIS weight.
         for j in range(dirs_here):
-            dim = dimensions.direction(plan.n_light, j)
+            u = samplers.uniform_pair(sampler, state, dimensions.direction(plan.n_light, j))
             wi, weight, pdf_dir, delta = _direction_sample(
                 plan.direction, kind, params, material, wo,
-                samplers.uniform(sampler, state, dimensions.lobe_choice(plan.n_light, j)),
-                samplers.uniform(sampler, state, dim), samplers.uniform(sampler, state, dim + 1))
+                samplers.uniform(sampler, state, dimensions.lobe_choice(plan.n_light, j)), u[0], u[1])
             value = (weight[0] / own_dir, weight[1] / own_dir, weight[2] / own_dir)
             if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
                 _flag_nan(radiance, lane, value)

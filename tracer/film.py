@@ -3,8 +3,23 @@
 Per pixel the film holds the sample count, the running mean and Welford's M2 (sum of squared
 deviations from the mean) in float64. Two films of disjoint samples merge exactly with Chan,
 Golub and LeVeque's parallel formula, so renders can be resumed, split across processes and
-pooled into references. Files are elsewhere: ``tracer.imagefiles`` (the EXR contract and
-PNG previews).
+pooled into references.
+
+Films of a sampler with replicates (``stratified``, ``sobol``: ``tracer.samplers``) also hold
+each replicate's count and mean. Their samples are not independent within a pixel, so M2 / (n -
+1) says little about the error of the mean; :meth:`Film.variance` is instead the *effective*
+per-sample variance, n x the variance of the pixel mean estimated from the R independent
+replicate means ``Y_r`` (counts ``n_r``, weights ``w_r = n_r / n``):
+
+    Var(mean) ~= R' / (R' - 1) sum_r w_r^2 (Y_r - mean)^2     (over the R' replicates with samples)
+
+which is the usual unbiased ``s^2 / R`` of the replicate means when the counts are equal, so
+that ``variance / count`` is the error of the pixel value for every sampler. Merges add
+replicate r of one film to replicate r of the other: both hold points of replicate r's own
+randomization (the same sequence continued, or another seed's independent one), and different
+replicates stay independent, so the estimate stays unbiased after any number of merges.
+
+Files are elsewhere: ``tracer.imagefiles`` (the EXR contract and PNG previews).
 """
 
 from __future__ import annotations
@@ -17,6 +32,7 @@ import numpy as np
 from .errors import InputError
 from .jit import jit
 from .record import RenderRecord, check_mergeable, merged
+from .samplers import replicates_of
 
 
 @dataclass
@@ -26,6 +42,9 @@ class Film:
     count : (P,) int64 samples per pixel.   mean : (P, 3) float64.   m2 : (P, 3) float64.
     record : how the samples were made (``tracer.record``), written to and read from the EXR
         header.
+    replicates : R (``tracer.samplers.REPLICATES``) for samplers with replicates, else 0.
+    rep_count : (P, R) int64 samples per replicate.   rep_mean : (P, R, 3) float64 their means.
+        (None when ``replicates`` is 0.)
     """
 
     width: int
@@ -34,6 +53,9 @@ class Film:
     mean: np.ndarray = field(default=None)  # type: ignore[assignment]
     m2: np.ndarray = field(default=None)  # type: ignore[assignment]
     record: RenderRecord = field(default_factory=RenderRecord)
+    replicates: int = 0
+    rep_count: np.ndarray | None = None
+    rep_mean: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.width * self.height
@@ -41,6 +63,9 @@ class Film:
             self.count = np.zeros(n, dtype=np.int64)
             self.mean = np.zeros((n, 3))
             self.m2 = np.zeros((n, 3))
+        if self.replicates and self.rep_count is None:
+            self.rep_count = np.zeros((n, self.replicates), dtype=np.int64)
+            self.rep_mean = np.zeros((n, self.replicates, 3))
 
     @property
     def spp(self) -> int:
@@ -52,24 +77,38 @@ class Film:
         """Whether every pixel has the same sample count."""
         return bool(np.all(self.count == self.count[0])) if len(self.count) else True
 
-    def add_block(self, first_pixel: int, samples: np.ndarray) -> None:
-        """Add ``samples (npix, k, 3)``: k samples for each of pixels first_pixel, ... ."""
+    def add_block(self, first_pixel: int, samples: np.ndarray, first_sample: int = 0) -> None:
+        """Add ``samples (npix, k, 3)``: samples ``first_sample .. first_sample + k - 1`` of each
+        of pixels first_pixel, ... (the sample index says which replicate a sample belongs to)."""
         _add_block(self.count, self.mean, self.m2, first_pixel, samples)
+        if self.replicates:
+            _add_replicates(self.rep_count, self.rep_mean, first_pixel, first_sample, samples)
 
     def merge(self, other: "Film") -> None:
-        """Fold ``other``'s statistics (same resolution) into this film, pixel by pixel, exactly.
-        The records are not looked at: :func:`merge_renders` checks them."""
+        """Fold ``other``'s statistics (same resolution and replicates) into this film, pixel by
+        pixel, exactly. The records are not looked at: :func:`merge_renders` checks them."""
         if (other.width, other.height) != (self.width, self.height):
             raise InputError(f"cannot merge a {other.width}x{other.height} film into a "
                              f"{self.width}x{self.height} one")
+        if other.replicates != self.replicates:
+            raise InputError(f"cannot merge a film of {other.replicates} replicates into one of "
+                             f"{self.replicates}: their error estimates would not combine")
         _merge(self.count, self.mean, self.m2, other.count, other.mean, other.m2)
+        if self.replicates:
+            _merge_replicates(self.rep_count, self.rep_mean, other.rep_count, other.rep_mean)
 
     def copy(self) -> "Film":
+        replicas = (self.rep_count.copy(), self.rep_mean.copy()) if self.replicates else (None, None)
         return Film(self.width, self.height, self.count.copy(), self.mean.copy(), self.m2.copy(),
-                    dataclasses.replace(self.record))
+                    dataclasses.replace(self.record), self.replicates, *replicas)
 
     def variance(self) -> np.ndarray:
-        """(P, 3) unbiased variance of one sample's estimate; 0 where count < 2."""
+        """(P, 3) variance of one sample's estimate, such that variance / count is the variance
+        of the pixel value: for independent samples the unbiased sample variance; for a sampler
+        with replicates the effective per-sample variance from the replicate means (module
+        docstring). 0 where there are fewer than 2 samples (or replicates with samples)."""
+        if self.replicates:
+            return _replicate_variance(self.count, self.rep_count, self.rep_mean)
         denom = np.maximum(self.count - 1, 1).astype(np.float64)[:, None]
         return np.where((self.count >= 2)[:, None], self.m2 / denom, 0.0)
 
@@ -91,6 +130,11 @@ def merge_renders(a: Film, b: Film, name_a: str = "the first render",
         raise InputError(f"cannot pool {name_a} ({a.width}x{a.height}) and {name_b} "
                          f"({b.width}x{b.height}): different resolutions")
     check_mergeable(a.record, b.record, name_a, name_b)
+    for name, film in ((name_a, a), (name_b, b)):
+        if film.replicates != replicates_of(film.record.sampler):
+            raise InputError(f"cannot pool {name_a} and {name_b}: {name} ({film.record.sampler} sampler) "
+                             "holds no replicate means (channels replicate0.R, ...), from which the error "
+                             "of a pool is estimated")
     pooled = a.copy()
     pooled.merge(b)
     pooled.record = merged(a.record, b.record)
@@ -122,6 +166,48 @@ def _merge(count, mean, m2, n_b, mean_b, m2_b) -> None:
     """Fold a whole film's ``(count, mean, m2)`` into another's."""
     for pixel in range(len(n_b)):
         _fold(count, mean, m2, pixel, n_b[pixel], mean_b[pixel], m2_b[pixel])
+
+
+def _replicate_variance(count: np.ndarray, rep_count: np.ndarray, rep_mean: np.ndarray) -> np.ndarray:
+    """(P, 3) effective per-sample variance n x Var(mean) from replicate counts ``(P, R)`` and
+    means ``(P, R, 3)`` (module docstring)."""
+    n = np.maximum(count, 1).astype(np.float64)[:, None]
+    w = rep_count / n  # (P, R)
+    pooled = np.einsum("pr,prc->pc", w, rep_mean)
+    used = (rep_count > 0).sum(axis=1)[:, None].astype(np.float64)  # R'
+    spread = np.einsum("pr,prc->pc", w * w, (rep_mean - pooled[:, None, :]) ** 2)
+    var_mean = np.where(used >= 2, used / np.maximum(used - 1, 1) * spread, 0.0)
+    return n * var_mean
+
+
+@jit
+def _add_replicates(rep_count, rep_mean, first, first_sample, samples) -> None:
+    """Fold ``samples (npix, k, 3)`` (sample indices first_sample, ...) into the running means of
+    their replicates (sample s belongs to replicate s % R)."""
+    npix, k, _ = samples.shape
+    replicates = rep_count.shape[1]
+    for row in range(npix):
+        pixel = first + row
+        for j in range(k):
+            r = (first_sample + j) % replicates
+            rep_count[pixel, r] += 1
+            share = 1.0 / rep_count[pixel, r]
+            for c in range(3):
+                rep_mean[pixel, r, c] += (samples[row, j, c] - rep_mean[pixel, r, c]) * share
+
+
+@jit
+def _merge_replicates(rep_count, rep_mean, n_b, mean_b) -> None:
+    """Fold replicate r of another film into replicate r of this one, for every pixel and r."""
+    for pixel in range(rep_count.shape[0]):
+        for r in range(rep_count.shape[1]):
+            n = rep_count[pixel, r] + n_b[pixel, r]
+            if n == 0:
+                continue
+            share = n_b[pixel, r] / n
+            for c in range(3):
+                rep_mean[pixel, r, c] += (mean_b[pixel, r, c] - rep_mean[pixel, r, c]) * share
+            rep_count[pixel, r] = n
 
 
 @jit

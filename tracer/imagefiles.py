@@ -8,6 +8,13 @@ between pixels (a render interrupted mid-pass), a seventh channel ``samples`` ho
 pixel's count and ``tracer:spp`` is the smallest count. Channels are looked up by name on read
 (EXR reorders them).
 
+Films of a sampler with replicates (``stratified``, ``sobol``) write their variance channels as
+the effective per-sample variance (``tracer.film``: count x the variance of the pixel mean
+estimated from independent replicates), so that ``variance / spp`` is the error of the pixel
+value for every sampler, and add each replicate's mean and count as layers
+``replicate<r>.R/G/B`` and ``replicate<r>.samples`` (float32), which merges and resumes pool
+replicate by replicate.
+
 Every write is atomic (``tracer.atomic``) and checked: an error from OpenImageIO, also at
 close, raises ``InputError`` and leaves any existing file as it was.
 """
@@ -27,6 +34,8 @@ from .record import RenderRecord
 CHANNELS = ("R", "G", "B", "variance.R", "variance.G", "variance.B")
 COUNT_CHANNEL = "samples"
 SPP_ATTRIBUTE = "tracer:spp"
+REPLICATE_LAYER = "replicate{}"
+MAX_REPLICATE_COUNT = 2**24  # counts in float32 channels stay exact below this
 HALF_MAX = 65504.0  # the largest finite 16-bit float
 MAX_COUNT = 2**53  # sample counts stay exact in float64
 
@@ -46,6 +55,14 @@ def write_exr(path: str | os.PathLike[str], film: Film, half: bool = False) -> N
     planes = [film.mean, film.variance()]
     if not film.uniform:
         planes.append(film.count[:, None].astype(np.float64))
+    if film.replicates:
+        if film.rep_count.size and int(film.rep_count.max()) >= MAX_REPLICATE_COUNT:
+            raise InputError(f"a replicate holds {int(film.rep_count.max())} samples, more than the "
+                             f"{MAX_REPLICATE_COUNT} a 32-bit float counts exactly; nothing was written",
+                             str(path))
+        for r in range(film.replicates):
+            names += [f"{REPLICATE_LAYER.format(r)}.{c}" for c in ("R", "G", "B", COUNT_CHANNEL)]
+            planes += [film.rep_mean[:, r, :], film.rep_count[:, r, None].astype(np.float64)]
     with np.errstate(over="ignore"):
         pixels = np.ascontiguousarray(np.concatenate(planes, axis=1), dtype=np.float32)
     bad = ~np.all(np.isfinite(pixels), axis=1)
@@ -124,7 +141,41 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
         # the file holds is unknown, so it may be read and compared with but not pooled.
         record.samples = None
     m2 = var * np.maximum(count - 1, 0)[:, None]
-    return Film(spec.width, spec.height, count, mean, m2, record)
+    film = Film(spec.width, spec.height, count, mean, m2, record)
+    _read_replicates(film, names, data, path)
+    return film
+
+
+def _read_replicates(film: Film, names: list[str], data: np.ndarray, path: str) -> None:
+    """Attach the replicate layers of a file whose sampler has replicates, checked: every layer
+    present with whole counts that add up to the pixel's count and finite means. A file of such
+    a sampler without them (another tool's) keeps its variance channel and cannot be pooled."""
+    from .samplers import replicates_of
+
+    replicates = replicates_of(film.record.sampler)
+    layers = [REPLICATE_LAYER.format(r) for r in range(replicates)]
+    found = [n for n in names if n.startswith("replicate")]
+    if not found:
+        return
+    wanted = [f"{layer}.{c}" for layer in layers for c in ("R", "G", "B", COUNT_CHANNEL)]
+    if sorted(found) != sorted(wanted):
+        raise InputError(f"replicate channels {', '.join(sorted(found)[:4])}... do not match the "
+                         f"{replicates} replicates of the {film.record.sampler or 'independent'} sampler",
+                         path)
+    columns = [[names.index(f"{layer}.{c}") for c in ("R", "G", "B")] for layer in layers]
+    rep_mean = np.ascontiguousarray(np.stack([data[:, col] for col in columns], axis=1))
+    counts = np.stack([data[:, names.index(f"{layer}.{COUNT_CHANNEL}")] for layer in layers], axis=1)
+    whole = np.all(np.isfinite(counts) & (counts >= 0) & (counts == np.rint(counts)), axis=1)
+    bad = ~whole | (np.where(whole[:, None], counts, 0).sum(axis=1) != film.count)
+    if bad.any():
+        raise InputError(f"replicate counts are not whole numbers adding up to the pixel's sample count at "
+                         f"{_pixel(bad, film.width)}", path)
+    bad = ~np.all(np.isfinite(rep_mean), axis=(1, 2))
+    if bad.any():
+        raise InputError(f"a replicate mean is not a finite number at {_pixel(bad, film.width)}", path)
+    film.replicates = replicates
+    film.rep_count = counts.astype(np.int64)
+    film.rep_mean = rep_mean
 
 
 def _error_text(source) -> str:

@@ -158,17 +158,28 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     finish and are kept, the rest are dropped, and the result says ``interrupted``.
     """
     last = settings.first_sample + settings.spp
+    if settings.sampler not in samplers.SAMPLERS:
+        raise InputError(f"unknown sampler {settings.sampler!r}; expected one of "
+                         f"{', '.join(samplers.SAMPLERS)}")
     if settings.spp < 1 or settings.first_sample < 0 or last > MAX_SAMPLE_INDEX:
         raise InputError(f"spp {settings.spp} from sample index {settings.first_sample}: sample indices must "
                          f"lie in 0 .. {MAX_SAMPLE_INDEX} (2^53, where counts stay exact in float64)")
+    if last > samplers.max_samples(settings.sampler):
+        raise InputError(f"spp {settings.spp} from sample index {settings.first_sample}: the "
+                         f"{settings.sampler} sampler draws at most {samplers.max_samples(settings.sampler)} "
+                         "samples per pixel")
     cam = scene.camera
-    film = film if film is not None else Film(cam.width, cam.height)
+    replicates = samplers.replicates_of(settings.sampler)
+    film = film if film is not None else Film(cam.width, cam.height, replicates=replicates)
     runs = estimator.strategy if estimator is not None else strategy
     earlier = film.record if bool(film.count.any()) else None
     if earlier is not None:
         _check_continues(earlier, scene, runs, settings)
+    if film.replicates != replicates:
+        raise InputError(f"cannot add {settings.sampler} samples to a film of {film.replicates} replicates "
+                         f"(the {settings.sampler} sampler keeps {replicates})")
     count_before = film.count.copy()  # to tell, if interrupted, how many sample indices were drawn
-    sampler = samplers.make(settings.sampler, settings.seed)
+    sampler = samplers.make(settings.sampler, settings.seed, settings.first_sample, settings.spp)
     bar = None
     nonfinite = 0
     samples = 0
@@ -179,7 +190,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     def merge(batch: Batch, result: tuple[np.ndarray, int]) -> None:
         nonlocal nonfinite, samples
         block, bad = result
-        film.add_block(batch.first_pixel, block)
+        film.add_block(batch.first_pixel, block, batch.first_sample)
         nonfinite += bad
         samples += batch.lanes
         if bar is not None:

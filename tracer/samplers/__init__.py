@@ -2,21 +2,34 @@
 
 Interface: a random number is ``u(seed, pixel, sample index, dimension)`` in [0, 1). A
 kernel starts a lane with ``start(sampler, pixel, sample)``, which returns the lane's state
-``(hash, pixel, sample)`` (each sampler uses what it needs: the independent one the hash, a
-Sobol sampler the indices), and draws dimension d with ``uniform(sampler, state, d)``; which
+``(key, index, spare)`` (a 64-bit key and the point index the sampler works with), and draws
+dimension d with ``uniform(sampler, state, d)`` (a pair, d even, with ``uniform_pair``); which
 dimension feeds which decision is ``tracer.samplers.dimensions``. Because numbers depend on
 (pixel, sample) and not on the batch a lane runs in, the same seed gives the same image bit
 for bit at any batch size and thread count.
 
-A sampler reaches compiled code as a :class:`SamplerParams` (its code and what it was seeded
-with). Adding a sampler: a module here with ``NAME``, ``start(...)`` and ``uniform(...)``, a
-code in ``SAMPLERS``, and a branch in :func:`start` and :func:`uniform`.
+A sampler reaches compiled code as a :class:`SamplerParams` (its code, what it was seeded
+with, and for ``stratified`` the render's grid). Adding a sampler: a module here with
+``NAME``, ``uniform`` and ``uniform_pair``, a code in ``SAMPLERS``, and a branch in :func:`start` and
+:func:`uniform`.
 
-=============  ====  ==========================================================
-name           code  what
-=============  ====  ==========================================================
-independent    0     counter-based hash (SplitMix64): independent uniforms
-=============  ====  ==========================================================
+=============  ====  ==========  ===============================================================
+name           code  replicates  what
+=============  ====  ==========  ===============================================================
+independent    0     none        counter-based hash (SplitMix64): independent uniforms
+stratified     1     8           jittered strata per pair of dimensions (``stratified.py``)
+sobol          2     8           Owen-scrambled Sobol points per pair of dimensions (``sobol.py``)
+=============  ====  ==========  ===============================================================
+
+Replicates: samples of one pixel drawn by a stratified or Sobol sampler are not independent
+(that is the point: they avoid each other), so the spread of the samples says little about the
+error of their mean. These samplers therefore split each pixel's samples into ``REPLICATES``
+independently randomized sets: sample ``s`` belongs to replicate ``s % R`` as its point
+``s // R``. The film keeps each replicate's count and mean, and the error of the pixel value is
+estimated from how the replicate means scatter (``tracer.film``). Eight replicates: enough
+degrees of freedom (7) for the pooled z-tests of ``check`` and ``stability``, while each
+replicate keeps 1/8 of the samples to form its net (a replicate of n points instead of 8 n
+costs QMC a factor 8^(a - 1) in variance where its error falls as n^-a).
 """
 
 from __future__ import annotations
@@ -26,20 +39,29 @@ from typing import NamedTuple
 import numpy as np
 
 from ..jit import jit
-from . import dimensions, independent
+from . import dimensions, independent, sobol, stratified
 
-SAMPLERS = (independent.NAME,)  # the code of a sampler is its index here
-INDEPENDENT = 0
+SAMPLERS = (independent.NAME, stratified.NAME, sobol.NAME)  # the code of a sampler is its index here
+INDEPENDENT, STRATIFIED, SOBOL = 0, 1, 2
+DEFAULT_SAMPLER = independent.NAME
+REPLICATES = 8
 
 
 class SamplerParams(NamedTuple):
     """A sampler as the kernels read it.
 
     code : index into ``SAMPLERS``.   seed_key : 64-bit key derived from the render's seed.
+    replicates : R, or 0 for the independent sampler.
+    first_sample : the render's first sample index (``stratified``: where its sets begin).
+    nx, ny : ``stratified``'s grid per pair of dimensions (1, 1 for the others).
     """
 
     code: int
     seed_key: np.uint64
+    replicates: int
+    first_sample: int
+    nx: int
+    ny: int
 
 
 def seed_key(seed: int) -> np.uint64:
@@ -50,24 +72,66 @@ def seed_key(seed: int) -> np.uint64:
     return np.random.SeedSequence(seed).generate_state(1, dtype=np.uint64)[0]
 
 
-def make(name: str, seed: int) -> SamplerParams:
-    """The sampler called ``name`` (one of ``SAMPLERS``) seeded with ``seed``."""
+def replicates_of(name: str | None) -> int:
+    """The replicates of the sampler called ``name``: 0 for ``independent`` (and None, files
+    from before samplers were named), ``REPLICATES`` for the others."""
+    return 0 if name in (None, independent.NAME) else REPLICATES
+
+
+def max_samples(name: str) -> int:
+    """One past the largest sample index the sampler ``name`` can draw in a pixel."""
+    return REPLICATES * sobol.MAX_INDEX if name == sobol.NAME else 2**53
+
+
+def make(name: str, seed: int, first_sample: int = 0, spp: int = 1) -> SamplerParams:
+    """The sampler called ``name`` (one of ``SAMPLERS``) seeded with ``seed``, for a render of
+    sample indices ``first_sample .. first_sample + spp - 1``."""
     if name not in SAMPLERS:
         raise ValueError(f"unknown sampler {name!r}; expected one of {', '.join(SAMPLERS)}")
-    return SamplerParams(SAMPLERS.index(name), seed_key(seed))
+    replicates = replicates_of(name)
+    nx, ny = stratified.grid(-(-spp // replicates)) if name == stratified.NAME else (1, 1)
+    return SamplerParams(SAMPLERS.index(name), seed_key(seed), replicates, int(first_sample), nx, ny)
 
 
 @jit
 def start(sampler: SamplerParams, pixel: int, sample: int):
-    """The state ``(hash, pixel, sample)`` of the lane that takes sample ``sample`` of pixel
-    ``pixel``."""
-    return independent.start(sampler.seed_key, pixel, sample), pixel, sample
+    """The state ``(key, index, 0)`` of the lane that takes sample ``sample`` of pixel
+    ``pixel``: for ``independent`` the lane's hash and the sample; for the others the key of
+    the sample's replicate (and, for ``stratified``, of the render's set) and its point index
+    in the replicate (in the render's set)."""
+    if sampler.code == INDEPENDENT:
+        return independent.start(sampler.seed_key, pixel, sample), sample, 0
+    r = sample % sampler.replicates
+    key = independent.start(sampler.seed_key, pixel, r)
+    index = sample // sampler.replicates
+    if sampler.code == STRATIFIED:
+        # The render's first point of replicate r: ceil((first_sample - r) / R), at least 0.
+        first = max(0, (sampler.first_sample - r + sampler.replicates - 1) // sampler.replicates)
+        key = independent.mix64(key + np.uint64(first + 1) * independent.GOLDEN_GAMMA)
+        index -= first
+    return key, index, 0
 
 
 @jit
 def uniform(sampler: SamplerParams, state, dim: int) -> float:
     """Dimension ``dim`` of a lane whose state is ``state``: uniform in [0, 1)."""
+    if sampler.code == SOBOL:
+        return sobol.uniform(state[0], state[1], dim)
+    if sampler.code == STRATIFIED:
+        return stratified.uniform(state[0], state[1], dim, sampler.nx, sampler.ny)
     return independent.uniform(state[0], dim)
+
+
+@jit
+def uniform_pair(sampler: SamplerParams, state, dim: int):
+    """Dimensions ``dim`` and ``dim + 1`` (``dim`` even: one pair of ``dimensions``) of a lane:
+    the same two numbers as two calls of :func:`uniform`, drawn together so that a sampler that
+    works per pair does the pair's work once."""
+    if sampler.code == SOBOL:
+        return sobol.uniform_pair(state[0], state[1], dim)
+    if sampler.code == STRATIFIED:
+        return stratified.uniform_pair(state[0], state[1], dim, sampler.nx, sampler.ny)
+    return independent.uniform(state[0], dim), independent.uniform(state[0], dim + 1)
 
 
 @jit
@@ -88,4 +152,5 @@ def uniforms(sampler: SamplerParams, pixel: np.ndarray, sample: np.ndarray, dims
     return out
 
 
-__all__ = ["SAMPLERS", "SamplerParams", "dimensions", "make", "seed_key", "start", "uniform", "uniforms"]
+__all__ = ["DEFAULT_SAMPLER", "REPLICATES", "SAMPLERS", "SamplerParams", "dimensions", "make", "max_samples",
+           "replicates_of", "seed_key", "start", "uniform", "uniform_pair", "uniforms"]

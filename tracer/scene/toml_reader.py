@@ -21,6 +21,7 @@ from .. import materials
 from ..camera import Camera
 from ..errors import InputError
 from ..record import MAX_SAMPLE_INDEX
+from ..samplers import SAMPLERS
 from ..strategy import LIGHT_SAMPLINGS, STRATEGIES
 from .icosphere import unit_icosphere
 from .model import Scene, Shape
@@ -261,6 +262,8 @@ def _read_render(r: _Reader) -> dict[str, Any]:
         out["strategy"] = r.string("strategy", STRATEGIES)
     if r.has("light_sampling"):
         out["light_sampling"] = r.string("light_sampling", LIGHT_SAMPLINGS)
+    if r.has("sampler"):
+        out["sampler"] = r.string("sampler", SAMPLERS)
     r.done()
     return out
 
