@@ -562,3 +562,32 @@ def test_false_alarm_rate_with_heavy_tailed_entries(tmp_path):
     for e in entries:
         print(f"  {e.name:32s} {e.spp:4d} {per_entry[e.name]:3d} {old_z[e.name]:3d}", file=sys.stderr)
     assert failed_trials <= bound, (failed_trials, per_entry)
+
+
+def test_sobol_baseline_passes_and_catches_lost_structure(write_scene, tmp_path, monkeypatch, capsys):
+    """`check --create --sampler sobol` writes entries that say their sampler, and the
+    unchanged tree passes them (the pixel and image-mean tests read the replicate-based
+    variance). Then the fault this guards against: Sobol renders that silently draw
+    independent numbers (the kernels given the independent sampler's code) stay unbiased but
+    lose QMC's gain on this diffuse room, and the one-sided rank test of relMSE (8 seeds a side,
+    smallest p 1/12870, below the level 0.0025 of 1 entry x 4 tests) flags it."""
+    from tracer import render_loop, samplers
+
+    scene = write_scene(DIFFUSE_SCENE, "room.toml")
+    baseline = tmp_path / "sobol.json"
+    assert main(["check", "--create", str(baseline), "--scenes", str(scene), "--strategies", "mis",
+                 "--spp", "16", "--reference-spp", "512", "--size", "32", "--sampler", "sobol"]) == 0
+    (entry,) = json.loads(baseline.read_text())["entries"]
+    assert entry["sampler"] == "sobol"
+    capsys.readouterr()
+    assert main(["check", "--baseline", str(baseline)]) == 0
+    original = samplers.make
+
+    def independent_numbers(name, *args, **kwargs):
+        return original(name, *args, **kwargs)._replace(code=samplers.SAMPLERS.index("independent"))
+
+    monkeypatch.setattr(render_loop.samplers, "make", independent_numbers)
+    result = run_check(baseline, stream=None)
+    failed = {v.measure for v in result.verdicts if not v.ok}
+    assert "relmse" in failed, format_table(result.verdicts)
+    assert "image mean" not in failed

@@ -571,15 +571,21 @@ def test_default_names_tell_settings_apart_and_the_summary_says_them(tmp_path, m
     assert "has no lights" in capsys.readouterr().err
 
 
+def scene_and_default(tmp_path, monkeypatch, render_line: str) -> tuple[Path, Path]:
+    """s.toml (GOOD) and d.toml (GOOD with ``render_line`` in its [render] table) in tmp_path,
+    which becomes the current folder."""
+    scene, with_default = tmp_path / "s.toml", tmp_path / "d.toml"
+    scene.write_text(GOOD)
+    with_default.write_text(f"[render]\n{render_line}\n" + GOOD)
+    monkeypatch.chdir(tmp_path)
+    return scene, with_default
+
+
 def test_light_sampling_from_the_command_line_and_the_scene(tmp_path, monkeypatch, capsys):
     """--light-sampling reaches the render (its record and default name say it), a scene's
     [render] light_sampling is the default that the flag overrides, strategies without light
     samples record none, and a bad name is one line with exit status 2."""
-    scene = tmp_path / "s.toml"
-    scene.write_text(GOOD)
-    with_default = tmp_path / "d.toml"
-    with_default.write_text('[render]\nlight_sampling = "solid-angle-cos"\n' + GOOD)
-    monkeypatch.chdir(tmp_path)
+    scene, with_default = scene_and_default(tmp_path, monkeypatch, 'light_sampling = "solid-angle-cos"')
     assert main(["render", str(scene), "--spp", "1", "--quiet", "--light-sampling", "solid-angle"]) == 0
     assert read_exr(tmp_path / "s_mis_solid-angle.exr").record.light_sampling == "solid-angle"
     assert main(["render", str(with_default), "--spp", "1", "--quiet"]) == 0
@@ -615,3 +621,40 @@ def test_files_without_light_sampling_pool_as_area_sampled(tmp_path):
     check_mergeable(old, area)
     with pytest.raises(InputError, match="light_sampling"):
         check_mergeable(old, solid)
+
+
+def test_sampler_from_the_command_line_and_the_scene(tmp_path, monkeypatch, capsys):
+    """--sampler reaches the render (its record, its replicate layers and its default name say
+    it), a scene's [render] sampler is the default that the flag overrides, a reference resumes
+    with its own sampler and refuses another, and a bad name is one line with exit status 2."""
+    scene, with_default = scene_and_default(tmp_path, monkeypatch, 'sampler = "sobol"')
+    assert main(["render", str(scene), "--spp", "8", "--quiet", "--sampler", "stratified"]) == 0
+    film = read_exr(tmp_path / "s_mis_stratified.exr")
+    assert film.record.sampler == "stratified" and film.replicates == 8
+    assert np.all(film.rep_count == 1)  # 8 samples: one in each replicate
+    assert main(["render", str(with_default), "--spp", "2", "--quiet"]) == 0
+    assert read_exr(tmp_path / "d_mis_sobol.exr").record.sampler == "sobol"
+    assert main(["render", str(with_default), "--spp", "2", "--quiet", "--sampler", "independent"]) == 0
+    assert read_exr(tmp_path / "d_mis.exr").replicates == 0
+    ref = tmp_path / "ref.exr"
+    assert main(["reference", str(scene), "--spp", "16", "--sampler", "sobol", "-o", str(ref),
+                 "--quiet"]) == 0
+    assert main(["reference", str(scene), "--spp", "16", "--resume", "-o", str(ref), "--quiet"]) == 0
+    grown = read_exr(ref)
+    assert grown.record.sampler == "sobol" and grown.record.samples == ((0, 0, 32),)
+    assert np.all(grown.rep_count == 4)
+    capsys.readouterr()
+    assert main(["reference", str(scene), "--spp", "8", "--resume", "--sampler", "stratified", "-o", str(ref),
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "sobol sampler, not stratified" in err[0] and "ref.exr" in err[0]
+    with pytest.raises(SystemExit) as exit_info:
+        main(["render", str(scene), "--sampler", "halton"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--sampler" in err[0] and "halton" in err[0]
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[render]\nsampler = "halton"\n' + GOOD)
+    assert main(["render", str(bad), "--spp", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad.toml" in err[0] and "sampler" in err[0] and "halton" in err[0]

@@ -615,14 +615,20 @@ def test_compare_sweep_over_seeds_with_vector_figures_on_the_cpu_clock(tmp_path,
     assert "--figure-format: unknown format 'eps'" in err and len(err.strip().splitlines()) == 1, err
 
 
-def test_compare_takes_a_list_of_light_samplings(tmp_path):
-    """--light-sampling area,solid-angle compares each technique with every strategy that takes
-    light samples (once for those that do not): files named by technique, records that say it,
-    one metrics row each."""
+def small_reference(tmp_path) -> tuple[str, Path]:
+    """veach_mis and a 16 x 16, 16-spp reference of it in tmp_path."""
     scene = str(SCENES / "veach_mis.toml")
     ref = tmp_path / "ref.exr"
     assert main(["reference", scene, "-o", str(ref), "--width", "16", "--height", "16", "--spp", "16",
                  "--quiet"]) == 0
+    return scene, ref
+
+
+def test_compare_takes_a_list_of_light_samplings(tmp_path):
+    """--light-sampling area,solid-angle compares each technique with every strategy that takes
+    light samples (once for those that do not): files named by technique, records that say it,
+    one metrics row each."""
+    scene, ref = small_reference(tmp_path)
     out = tmp_path / "cmp"
     assert main(["compare", scene, "--reference", str(ref), "--spp", "2", "--out", str(out), "--quiet",
                  "--strategies", "light,bsdf", "--light-sampling", "area,solid-angle"]) == 0
@@ -638,3 +644,24 @@ def test_compare_takes_a_list_of_light_samplings(tmp_path):
     # Where each technique wins: its efficiency map against the strategy's first technique.
     assert (out / "efficiency_light_solid-angle_vs_light.png").is_file()
     assert (out / "efficiency_bsdf_vs_light.png").is_file()
+
+
+def test_compare_takes_a_list_of_samplers(tmp_path):
+    """--sampler independent,sobol renders every strategy with each sampler: files named by
+    sampler, records that say it, a metrics row each with a sampler column, an efficiency map
+    of each sampler against the strategy's first run, and sweep curves told apart by sampler."""
+    scene, ref = small_reference(tmp_path)
+    out = tmp_path / "cmp"
+    assert main(["compare", scene, "--reference", str(ref), "--spp", "8", "--out", str(out), "--quiet",
+                 "--strategies", "mis", "--sampler", "independent,sobol", "--sweep", "--sweep-seeds",
+                 "2"]) == 0
+    doc = json.loads((out / "metrics.json").read_text())
+    assert {(r["name"], r["sampler"]) for r in doc["results"]} == {("mis", "independent"),
+                                                                   ("mis_sobol", "sobol")}
+    assert read_exr(out / "mis_sobol.exr").record.sampler == "sobol"
+    assert read_exr(out / "mis_sobol.exr").replicates == 8
+    assert read_exr(out / "mis.exr").record.sampler == "independent"
+    header = (out / "metrics.csv").read_text().splitlines()[0].split(",")
+    assert "sampler" in header
+    assert (out / "efficiency_mis_sobol_vs_mis.png").is_file()
+    assert [r["strategy"] for r in doc["convergence"]] == ["mis", "mis_sobol"]

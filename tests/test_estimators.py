@@ -156,6 +156,48 @@ def test_every_strategy_matches_polygon_light_closed_form(write_scene):
     assert not failures, "\n".join(failures)
 
 
+# The samplers whose points within a pixel are not independent: the tests below give each
+# pixel PIXEL_SPP samples of its own scrambles (as a render does) and test the per-pixel means,
+# which are independent across pixels (each pixel has its own randomization).
+QMC_SAMPLERS = ("stratified", "sobol")
+PIXEL_SPP = 64
+
+
+def pixel_means(estimator: DirectLighting, origins, dirs, seed: int, sampler: str) -> np.ndarray:
+    """Rays in groups of PIXEL_SPP taken as samples 0 .. PIXEL_SPP - 1 of one pixel each, and
+    the mean radiance of each group ``(n / PIXEL_SPP, 3)``."""
+    n = len(origins)
+    lanes = np.arange(n, dtype=np.int64)
+    radiance = estimator.radiance(origins, dirs, seed=seed, pixel=lanes // PIXEL_SPP,
+                                  sample=lanes % PIXEL_SPP, sampler=sampler)
+    return radiance.reshape(n // PIXEL_SPP, PIXEL_SPP, 3).mean(axis=1)
+
+
+@pytest.mark.parametrize("sampler", QMC_SAMPLERS)
+def test_every_strategy_matches_closed_form_under_each_sampler(write_scene, sampler):
+    """The closed-form test with stratified and Sobol points: per strategy and point, 256
+    pixels of 64 samples each (8 replicates of 8 points: a stratified 3 x 3 grid or a scrambled
+    (0, 3, 2)-net per pair), and a one-sample t-test of the 256 pixel means (independent across
+    pixels, each with its own scrambles) against rho/pi * E, Sidak-corrected over strategies x
+    points x channels x both samplers. A sampler whose points are not uniform, or a dimension
+    pair that is reused (correlating, say, the light point with the BSDF direction), shifts the
+    means by many standard errors."""
+    scene = load_scene(write_scene(ANALYTIC_SCENE))
+    expected = np.array([expected_radiance(x) for x in POINTS])
+    origins, dirs, which = shoot_at(POINTS, 256 * PIXEL_SPP)
+    level = sidak(len(STRATEGIES) * len(POINTS) * 3 * len(QMC_SAMPLERS))
+    failures = []
+    for i, strategy in enumerate(STRATEGIES):
+        estimator = DirectLighting(scene, strategy)
+        for p in range(len(POINTS)):
+            means = pixel_means(estimator, origins[which == p], dirs[which == p], 300 + i, sampler)
+            pvalues = t_test_mean(means, expected[p])
+            if np.any(pvalues < level):
+                failures.append(f"{strategy}: point {POINTS[p]} mean {means.mean(axis=0)} "
+                                f"expected {expected[p]} p={pvalues}")
+    assert not failures, "\n".join(failures)
+
+
 def _furnace_scene(write_scene, tmp_path, material: str) -> object:
     """A small plate inside a closed sphere that emits radiance 1 inward from every face."""
     sphere = trimesh.creation.icosphere(subdivisions=2, radius=2.0)
@@ -191,21 +233,26 @@ FURNACE_CASES = [(name, "area") for name in ("uniform", "cosine", "bsdf", "light
     (name, sampling) for name in ("light", "mis") for sampling in ("solid-angle", "solid-angle-cos")]
 
 
+@pytest.mark.parametrize("sampler", ("independent", *QMC_SAMPLERS))
 @pytest.mark.parametrize("strategy, light_sampling", FURNACE_CASES)
-def test_white_furnace_diffuse(write_scene, tmp_path, strategy, light_sampling):
+def test_white_furnace_diffuse(write_scene, tmp_path, strategy, light_sampling, sampler):
     """A white (rho = 1) diffuse plate under uniform radiance 1 from every direction reflects
-    exactly 1. Cosine/BSDF sampling has zero variance here, so it must be 1 to float precision;
-    the others (light sampling of the inside-out sphere's triangles by area, spherical triangle
-    and cosine-warped spherical triangle) pass a t-test at the Sidak level for 9 cases x 3
-    channels."""
+    exactly 1, with every sampler. Cosine/BSDF sampling has zero variance here, so it must be 1
+    to float precision; the others (light sampling of the inside-out sphere's triangles by area,
+    spherical triangle and cosine-warped spherical triangle) pass a t-test at the Sidak level for
+    9 cases x 3 samplers x 3 channels: of the samples themselves for independent ones, of the
+    means of pixels of 64 samples for stratified and Sobol points (``pixel_means``)."""
     scene = _furnace_scene(write_scene, tmp_path, 'type = "diffuse"\nreflectance = [1.0, 1.0, 1.0]')
-    origins, dirs, _ = shoot_at(np.array([[0.0, 0.0, 0.0]]), 50_000)
-    radiance = DirectLighting(scene, Strategy(strategy, light_sampling=light_sampling)).radiance(
-        origins, dirs, seed=7)
+    origins, dirs, _ = shoot_at(np.array([[0.0, 0.0, 0.0]]), 50_048)  # 782 pixels of 64
+    estimator = DirectLighting(scene, Strategy(strategy, light_sampling=light_sampling))
+    if sampler == "independent":
+        radiance = estimator.radiance(origins, dirs, seed=7)
+    else:
+        radiance = pixel_means(estimator, origins, dirs, 7, sampler)
     if strategy in ("cosine", "bsdf"):
         np.testing.assert_allclose(radiance, 1.0, rtol=1e-9)
     else:
-        assert np.all(t_test_mean(radiance, np.ones(3)) > sidak(len(FURNACE_CASES) * 3))
+        assert np.all(t_test_mean(radiance, np.ones(3)) > sidak(len(FURNACE_CASES) * 3 * 3))
 
 
 @pytest.mark.parametrize("alpha", [0.05, 0.3, 1.0])

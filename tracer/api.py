@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .film import Film
-from .samplers import DEFAULT_SAMPLER, SAMPLERS
+from .sampler_choice import DEFAULT_SAMPLER, SAMPLERS
 from .scene import Scene, load_scene
 from .strategy import DEFAULT_LIGHT_SAMPLING, Strategy
 

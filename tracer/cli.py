@@ -13,6 +13,7 @@ from pathlib import Path
 
 from . import __version__, interrupts
 from .errors import InputError
+from .sampler_choice import DEFAULT_SAMPLER, SAMPLERS
 
 EXIT_CHECK_FAILED = 1
 EXIT_BAD_INPUT = 2
@@ -91,6 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--strategy", choices=STRATEGIES,
                    help="sampling strategy (default: the scene's, else mis)")
     _add_strategy_options(r)
+    _add_sampler_option(r)
     _add_render_options(r)
     r.set_defaults(run=cmd_render)
 
@@ -107,6 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     ref.add_argument("--force", action="store_true", help="replace an existing OUTPUT (without it, "
                      "an existing reference is only ever grown, with --resume)")
     _add_strategy_options(ref)
+    _add_sampler_option(ref, resumed=True)
     _add_render_options(ref)
     # None = not given: a resume takes these from the file, a new reference the usual defaults.
     ref.set_defaults(run=cmd_reference, heuristic=None, light_samples=None, bsdf_samples=None,
@@ -145,6 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--crop", action="append", type=_crop, metavar="X,Y,W,H",
                    help="inset region in pixels (repeatable; default: chosen where strategies differ most)")
     _add_strategy_options(c, compared=True)
+    _add_sampler_option(c, compared=True)
     c.add_argument("--seed", type=_seed, default=None,
                    help="random seed (default: the smallest the reference holds no samples of)")
     c.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
@@ -184,6 +188,8 @@ def build_parser() -> argparse.ArgumentParser:
     ch.add_argument("--size", type=_int_in(4, 4096), default=None,
                     help="with --create: longer side of the check's images and references in pixels "
                     "(default 64)")
+    ch.add_argument("--sampler", choices=SAMPLERS, default=None,
+                    help=f"with --create: the sampler of every entry (default {DEFAULT_SAMPLER})")
     ch.add_argument("--out", default="check_failures", help="where the maps of failing entries go")
     ch.add_argument("--seed-offset", type=_seed, default=0,
                     help="add this to every seed (other random numbers, same statistics)")
@@ -212,6 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--reference-spp", type=_spp, default=1024,
                     help="spp of each case's MIS reference (default 1024)")
     st.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
+    _add_sampler_option(st, default=DEFAULT_SAMPLER)
     st.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
     st.set_defaults(run=cmd_stability)
 
@@ -255,12 +262,36 @@ def _add_strategy_options(p: argparse.ArgumentParser, compared: bool = False) ->
 def _light_samplings(text: str) -> list[str]:
     from .strategy import LIGHT_SAMPLINGS
 
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    bad = [n for n in names if n not in LIGHT_SAMPLINGS]
-    if bad or not names or len(set(names)) != len(names):
-        what = f"unknown '{bad[0]}'" if bad else ("repeated names" if names else "empty")
-        raise argparse.ArgumentTypeError(f"{what} (expected some of {', '.join(LIGHT_SAMPLINGS)})")
-    return names
+    return _names_of(LIGHT_SAMPLINGS)(text)
+
+
+def _add_sampler_option(p: argparse.ArgumentParser, compared: bool = False, default: str | None = None,
+                        resumed: bool = False) -> None:
+    """``--sampler``: one name, or with ``compared`` a comma-separated list."""
+    what = (f"{SAMPLERS[0]} (counter-based hash), {SAMPLERS[1]} (jittered strata) or {SAMPLERS[2]} "
+            "(Owen-scrambled Sobol); the variance stays honest for each (8 independent replicates)")
+    if compared:
+        p.add_argument("--sampler", type=_names_of(SAMPLERS), default=None, metavar="LIST",
+                       help=f"comma-separated samplers to compare, each with every strategy: some of {what} "
+                       f"(default: the scene's [render] sampler, else {DEFAULT_SAMPLER})")
+        return
+    fallback = f"default {default}" if default else \
+        f"default: the scene's [render] sampler, else {DEFAULT_SAMPLER}"
+    kept = "; --resume keeps the file's" if resumed else ""
+    p.add_argument("--sampler", choices=SAMPLERS, default=default,
+                   help=f"where the random numbers come from: {what} ({fallback}{kept})")
+
+
+def _names_of(choices: tuple[str, ...]):
+    """An argparse type: a comma-separated list of distinct names from ``choices``."""
+    def parse(text: str) -> list[str]:
+        names = [n.strip() for n in text.split(",") if n.strip()]
+        bad = [n for n in names if n not in choices]
+        if bad or not names or len(set(names)) != len(names):
+            what = f"unknown '{bad[0]}'" if bad else ("repeated names" if names else "empty")
+            raise argparse.ArgumentTypeError(f"{what} (expected some of {', '.join(choices)})")
+        return names
+    return parse
 
 
 def _add_render_options(p: argparse.ArgumentParser) -> None:
@@ -444,12 +475,14 @@ def cmd_render(args: argparse.Namespace) -> int:
     strategy = _strategy_from(args, args.strategy or defaults.get("strategy", "mis"),
                               args.light_sampling or defaults.get("light_sampling"))
     spp = args.spp or defaults.get("spp", 64)
-    # The default name tells settings apart (mis_balance, light_x4, seed 5), so that renders
-    # with other options do not overwrite each other.
+    sampler = args.sampler or defaults.get("sampler", DEFAULT_SAMPLER)
+    # The default name tells settings apart (mis_balance, light_x4, sobol, seed 5), so that
+    # renders with other options do not overwrite each other.
     seed_part = f"_seed{args.seed}" if args.seed else ""
-    output = _exr_path(args.output or f"{scene.name}_{strategy.file_stem}{seed_part}.exr")
+    sampler_part = f"_{sampler}" if sampler != DEFAULT_SAMPLER else ""
+    output = _exr_path(args.output or f"{scene.name}_{strategy.file_stem}{sampler_part}{seed_part}.exr")
     _warn_if_dark(scene)
-    settings = RenderSettings(spp=spp, seed=args.seed, threads=args.threads)
+    settings = RenderSettings(spp=spp, seed=args.seed, threads=args.threads, sampler=sampler)
     result = render(scene, strategy, settings, progress=not args.quiet)
     return _finish(result, scene, strategy, output, spp, args.quiet, args.exposure)
 
@@ -460,7 +493,7 @@ def cmd_reference(args: argparse.Namespace) -> int:
     from .render_loop import RenderSettings, render
 
     output = _exr_path(args.output or f"{Path(args.scene).stem}_reference.exr")
-    film, seed, first, sampler = None, args.seed, 0, "independent"
+    film, seed, first, sampler = None, args.seed, 0, args.sampler
     defaults = {"heuristic": "power", "light_samples": 1, "bsdf_samples": 1, "one_sample": False,
                 "light_selection": "power", "light_sampling": None}
     width, height = args.width, args.height
@@ -494,7 +527,12 @@ def cmd_reference(args: argparse.Namespace) -> int:
         held = film.record.samples or ()
         seed = film.record.seed if film.record.seed is not None else (held[-1][0] if held else 0)
         first = film.record.fresh_start(seed)
-        sampler = film.record.sampler or "independent"
+        sampler = film.record.sampler or DEFAULT_SAMPLER
+        if args.sampler is not None and args.sampler != sampler:
+            raise InputError(f"--resume: the reference was rendered with the {sampler} sampler, not "
+                             f"{args.sampler} (its samples would not pool); leave --sampler out", str(output))
+    else:
+        sampler = sampler or scene.render_defaults.get("sampler", DEFAULT_SAMPLER)
     settings = RenderSettings(spp=args.spp, seed=seed, threads=args.threads, first_sample=first,
                               sampler=sampler)
     try:
@@ -547,28 +585,32 @@ def cmd_compare(args: argparse.Namespace) -> int:
     comparison = Comparison(scene, reference, seeds[0], args.threads, progress=not args.quiet,
                             clock=args.clock)
 
-    def run(strategy):
+    def run(strategy, sampler=DEFAULT_SAMPLER):
         if args.time:
-            return comparison.equal_time(strategy, args.time)
-        return comparison.equal_spp(strategy, args.spp)
+            return comparison.equal_time(strategy, args.time, sampler)
+        return comparison.equal_spp(strategy, args.spp, sampler)
 
     # Every strategy with every light sampling asked for; those without light samples once.
     samplings = args.light_sampling or [scene.render_defaults.get("light_sampling")]
     strategies = [_strategy_from(args, name, sampling) for name in names
                   for sampling in (samplings if _strategy_from(args, name).light_count else samplings[:1])]
+    sampler_names = args.sampler or [scene.render_defaults.get("sampler", DEFAULT_SAMPLER)]
 
     mode = report.describe_mode(args.spp, args.time, args.clock)
     if not args.quiet:
         print(f"{scene.name}: {mode['description']} at {reference.width}x{reference.height}", file=sys.stderr)
     try:
-        runs = [run(strategy) for strategy in strategies]
+        runs = [run(strategy, sampler) for strategy in strategies for sampler in sampler_names]
         sweep, allocation = [], []
         if args.sweep:
             for strategy in strategies:
-                sweep += comparison.sweep(strategy, seeds, max_spp=args.spp, budget=args.time)
+                for sampler in sampler_names:
+                    sweep += comparison.sweep(strategy, seeds, max_spp=args.spp, budget=args.time,
+                                              sampler=sampler)
             first_sampling = _strategy_from(args, "mis", samplings[0]).light_sampling
             allocation = [run(Strategy("mis", args.heuristic, n_light, n_bsdf,
-                                       light_selection=args.light_selection, light_sampling=first_sampling))
+                                       light_selection=args.light_selection, light_sampling=first_sampling),
+                              sampler_names[0])
                           for n_light, n_bsdf in ALLOCATIONS]
     except KeyboardInterrupt:
         # A strategy cut short would be compared at less time or fewer samples than the others.
@@ -618,7 +660,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     from .study.check import create_baseline, default_baseline, format_table, parse_strategies, run_check
 
     create_options = {"--scenes": args.scenes, "--strategies": args.strategies, "--spp": args.spp,
-                      "--seeds": args.seeds, "--reference-spp": args.reference_spp, "--size": args.size}
+                      "--seeds": args.seeds, "--reference-spp": args.reference_spp, "--size": args.size,
+                      "--sampler": args.sampler}
     if args.create is None:
         given = [name for name, value in create_options.items() if value is not None]
         if given:
@@ -635,7 +678,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         result = create_baseline(args.create, args.scenes.split(","), parse_strategies(args.strategies),
                                  spp=args.spp or 16, seeds=args.seeds or 8,
                                  reference_spp=args.reference_spp or 1024, size=args.size or 64,
-                                 threads=args.threads)
+                                 threads=args.threads, sampler=args.sampler or DEFAULT_SAMPLER)
         print(f"baseline written: {args.create} ({len(result.measurements)} entries); check with "
               f"tracer check --baseline {args.create}", file=sys.stderr)
         return 0
@@ -666,7 +709,8 @@ def cmd_stability(args: argparse.Namespace) -> int:
     from .study.stability import Cell, expectations, format_table, run_suite
 
     out = _output_folder(args.out)
-    doc = run_suite(out, spp=args.spp, seed=args.seed, threads=args.threads, reference_spp=args.reference_spp)
+    doc = run_suite(out, spp=args.spp, seed=args.seed, threads=args.threads, reference_spp=args.reference_spp,
+                    sampler=args.sampler)
     print(format_table([Cell(**c) for c in doc["cells"]]))
     print("\nVeach's bound for balance MIS (variances summed over 144 shading points):")
     for name, b in doc["veach_bound"].items():

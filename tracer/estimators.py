@@ -108,14 +108,16 @@ class DirectLighting:
 
         Lane i draws its random numbers as sample ``sample[i]`` of pixel ``pixel[i]`` (``(n,)``
         int64; defaults: pixel = 0 .. n - 1, sample = 0, so every lane is independent) from
-        ``sampler`` seeded with ``seed``. Non-finite values are returned as they are.
+        ``sampler`` seeded with ``seed``, as a render of samples 0 .. max(sample) would (which
+        sizes ``stratified``'s grid). Non-finite values are returned as they are.
         """
         n = len(origins)
         pixel = np.arange(n, dtype=np.int64) if pixel is None else np.asarray(pixel, dtype=np.int64)
         sample = np.broadcast_to(np.asarray(0 if sample is None else sample, dtype=np.int64), (n,))
+        spp = int(sample.max()) + 1 if n else 1
         return self.shade_lanes(np.ascontiguousarray(origins, dtype=np.float32),
-                                np.ascontiguousarray(dirs, dtype=np.float32), samplers.make(sampler, seed),
-                                pixel, np.ascontiguousarray(sample))
+                                np.ascontiguousarray(dirs, dtype=np.float32),
+                                samplers.make(sampler, seed, 0, spp), pixel, np.ascontiguousarray(sample))
 
     def shade_lanes(self, origins: np.ndarray, dirs: np.ndarray, sampler: samplers.SamplerParams,
                     pixel: np.ndarray, sample: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ import numpy as np
 from .errors import InputError
 from .jit import jit
 from .record import RenderRecord, check_mergeable, merged
-from .samplers import replicates_of
+from .sampler_choice import replicates_of
 
 
 @dataclass

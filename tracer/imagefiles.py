@@ -150,7 +150,7 @@ def _read_replicates(film: Film, names: list[str], data: np.ndarray, path: str) 
     """Attach the replicate layers of a file whose sampler has replicates, checked: every layer
     present with whole counts that add up to the pixel's count and finite means. A file of such
     a sampler without them (another tool's) keeps its variance channel and cannot be pooled."""
-    from .samplers import replicates_of
+    from .sampler_choice import replicates_of
 
     replicates = replicates_of(film.record.sampler)
     layers = [REPLICATE_LAYER.format(r) for r in range(replicates)]

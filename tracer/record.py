@@ -207,7 +207,7 @@ def _names() -> dict[str, tuple[str, ...]]:
     """The values a header's named fields may take where tracer acts on them: a resume renders
     with the file's sampler. (The strategy and heuristic are only compared and shown, and other
     tools name theirs as they like: the Mitsuba cross-check writes ``mitsuba-direct``.)"""
-    from .samplers import SAMPLERS
+    from .sampler_choice import SAMPLERS
     from .strategy import LIGHT_SAMPLINGS
 
     return {"sampler": SAMPLERS, "light_sampling": (*LIGHT_SAMPLINGS, "none")}

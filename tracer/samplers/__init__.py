@@ -39,12 +39,10 @@ from typing import NamedTuple
 import numpy as np
 
 from ..jit import jit
+from ..sampler_choice import DEFAULT_SAMPLER, REPLICATES, SAMPLERS, max_samples, replicates_of
 from . import dimensions, independent, sobol, stratified
 
-SAMPLERS = (independent.NAME, stratified.NAME, sobol.NAME)  # the code of a sampler is its index here
-INDEPENDENT, STRATIFIED, SOBOL = 0, 1, 2
-DEFAULT_SAMPLER = independent.NAME
-REPLICATES = 8
+INDEPENDENT, STRATIFIED, SOBOL = (SAMPLERS.index(m.NAME) for m in (independent, stratified, sobol))
 
 
 class SamplerParams(NamedTuple):
@@ -70,17 +68,6 @@ def seed_key(seed: int) -> np.uint64:
     if seed < 0:
         raise ValueError(f"seed must be >= 0, got {seed}")
     return np.random.SeedSequence(seed).generate_state(1, dtype=np.uint64)[0]
-
-
-def replicates_of(name: str | None) -> int:
-    """The replicates of the sampler called ``name``: 0 for ``independent`` (and None, files
-    from before samplers were named), ``REPLICATES`` for the others."""
-    return 0 if name in (None, independent.NAME) else REPLICATES
-
-
-def max_samples(name: str) -> int:
-    """One past the largest sample index the sampler ``name`` can draw in a pixel."""
-    return REPLICATES * sobol.MAX_INDEX if name == sobol.NAME else 2**53
 
 
 def make(name: str, seed: int, first_sample: int = 0, spp: int = 1) -> SamplerParams:

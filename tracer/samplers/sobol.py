@@ -37,7 +37,6 @@ from ..jit import jit
 from .independent import GOLDEN_GAMMA, mix64
 
 NAME = "sobol"
-MAX_INDEX = 2**32  # points per replicate: the sequence is generated with 32-bit indices
 _M32 = np.uint64(0xFFFFFFFF)
 _BYTE = np.uint64(0xFF)
 _S8, _S16, _S24 = np.uint64(8), np.uint64(16), np.uint64(24)

@@ -21,7 +21,7 @@ from .. import materials
 from ..camera import Camera
 from ..errors import InputError
 from ..record import MAX_SAMPLE_INDEX
-from ..samplers import SAMPLERS
+from ..sampler_choice import SAMPLERS
 from ..strategy import LIGHT_SAMPLINGS, STRATEGIES
 from .icosphere import unit_icosphere
 from .model import Scene, Shape

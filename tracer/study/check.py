@@ -84,6 +84,7 @@ from ..errors import InputError
 from ..film import Film, merge_renders
 from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
 from ..render_loop import RenderSettings, render_complete
+from ..sampler_choice import DEFAULT_SAMPLER, SAMPLERS
 from ..scene import Scene, default_scene_path, load_scene
 from ..strategy import DEFAULT_LIGHT_SAMPLING, HEURISTICS, LIGHT_SAMPLINGS, STRATEGIES, Strategy
 from . import metrics, statistics
@@ -119,6 +120,7 @@ class Entry:
     light_samples: int = 1
     bsdf_samples: int = 1
     light_sampling: str = DEFAULT_LIGHT_SAMPLING
+    sampler: str = DEFAULT_SAMPLER
     downsample: int = 4
     pixel_test: bool = True
     reference: str | None = None
@@ -134,6 +136,8 @@ class Entry:
         label = self.strategy if self.strategy != "mis" else f"mis-{self.heuristic}"
         if self.light_sampling != DEFAULT_LIGHT_SAMPLING:
             label += f"-{self.light_sampling}"
+        if self.sampler != DEFAULT_SAMPLER:
+            label += f"-{self.sampler}"
         return f"{self.scene}/{label}"
 
     def strategy_object(self) -> Strategy:
@@ -145,9 +149,11 @@ class Entry:
         return self.reference or f"references/{self.scene}.exr"
 
     def to_json(self) -> dict[str, Any]:
-        # The default light sampling is left out, so that baselines of tracer 0.2 stay as they were.
+        # The default light sampling and sampler are left out, so that baselines of tracer 0.2
+        # stay as they were.
         return {k: v for k, v in self.__dict__.items() if v is not None and v != ""
-                and not (k == "light_sampling" and v == DEFAULT_LIGHT_SAMPLING)}
+                and not (k == "light_sampling" and v == DEFAULT_LIGHT_SAMPLING)
+                and not (k == "sampler" and v == DEFAULT_SAMPLER)}
 
 
 @dataclass
@@ -287,6 +293,8 @@ def _field_problem(name: str, value: Any, raw: dict[str, Any]) -> str | None:
         return None if value in HEURISTICS else f"one of {', '.join(HEURISTICS)}"
     if name == "light_sampling":
         return None if value in LIGHT_SAMPLINGS else f"one of {', '.join(LIGHT_SAMPLINGS)}"
+    if name == "sampler":
+        return None if value in SAMPLERS else f"one of {', '.join(SAMPLERS)}"
     if name == "spp":
         return None if _is_int(value, 1, 2**31) else "a whole number of samples >= 1"
     if name in ("light_samples", "bsdf_samples"):
@@ -343,18 +351,18 @@ def test_level(entries: int) -> float:
     return statistics.sidak(FAMILY_ALPHA, TESTS_PER_ENTRY * max(entries, 1))
 
 
-def smallest_p(seeds: int, spp: int) -> float:
+def smallest_p(seeds: int, spp: int, sampler: str = DEFAULT_SAMPLER) -> float:
     """The smallest p-value the entry's rank and permutation tests can reach with ``seeds``:
     1 / C(2n, n) for the one-sided Mann-Whitney tests of n seeds a side, 2 / C(2r, r) for
     the two-sided permutation test of r replicates a side (a split and its mirror tie)."""
-    r = seeds * replicates_per_seed(spp)
+    r = seeds * replicates_per_seed(spp, sampler)
     return max(statistics.mann_whitney_smallest_p(seeds, seeds), 2 * statistics.mann_whitney_smallest_p(r, r))
 
 
-def seeds_needed(level: float, spp: int) -> int:
+def seeds_needed(level: float, spp: int, sampler: str = DEFAULT_SAMPLER) -> int:
     """The fewest seeds with which every test of an entry can reach ``level``."""
     n = 2
-    while smallest_p(n, spp) >= level:
+    while smallest_p(n, spp, sampler) >= level:
         n += 1
     return n
 
@@ -365,11 +373,11 @@ def check_seeds(entries: list[Entry], where: str) -> None:
     level = test_level(len(entries))
     for i, e in enumerate(entries):
         n = len(e.seeds)
-        smallest = smallest_p(n, e.spp)
+        smallest = smallest_p(n, e.spp, e.sampler)
         if smallest >= level:
             raise InputError(f"{n} seed(s): the rank tests' smallest p-value, {smallest:.2g}, cannot go "
                              f"below their level {level:.2g} ({len(entries)} entries), so they could never "
-                             f"fail; use at least {seeds_needed(level, e.spp)} seeds", where,
+                             f"fail; use at least {seeds_needed(level, e.spp, e.sampler)} seeds", where,
                              f"entries[{i}].seeds")
 
 
@@ -426,7 +434,7 @@ def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) ->
                          "the renders would share its samples", str(ref_path))
     ref_mean, ref_var, ref_sample_var = downsampled_reference(reference, f, exr_is_half(ref_path))
     strategy = entry.strategy_object()
-    parts = replicates_per_seed(entry.spp)
+    parts = replicates_per_seed(entry.spp, entry.sampler)
     films: list[Film] = []
     pooled: Film | None = None
     relmse, variance, seconds = [], [], 0.0
@@ -434,7 +442,8 @@ def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) ->
         film: Film | None = None
         for j in range(parts):  # sample indices j spp/parts, ...: together the seed's spp samples
             settings = RenderSettings(spp=entry.spp // parts, seed=seed + seed_offset,
-                                      first_sample=j * (entry.spp // parts), threads=threads)
+                                      first_sample=j * (entry.spp // parts), threads=threads,
+                                      sampler=entry.sampler)
             result = render_complete(scene, strategy, settings)
             films.append(result.film)
             film = result.film if film is None else merge_renders(film, result.film)
@@ -447,9 +456,13 @@ def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) ->
                        ref_sample_var, scene, seconds)
 
 
-def replicates_per_seed(spp: int) -> int:
+def replicates_per_seed(spp: int, sampler: str = DEFAULT_SAMPLER) -> int:
     """Independent renders per seed for the image-mean test: ``REPLICATES_PER_SEED`` parts of
-    the seed's samples when spp divides evenly (equal parts, equally distributed), else 1."""
+    the seed's samples when spp divides evenly (equal parts, equally distributed), else 1.
+    Also 1 for ``sobol``: the parts of one seed would continue the same scrambled sequences and
+    not be independent (``stratified`` keys each part's sets by its first index, so they are)."""
+    if sampler == "sobol":
+        return 1
     return REPLICATES_PER_SEED if spp % REPLICATES_PER_SEED == 0 else 1
 
 
@@ -758,6 +771,7 @@ def create_baseline(
     size: int = 64,
     threads: int = 2,
     stream=sys.stderr,
+    sampler: str = DEFAULT_SAMPLER,
 ) -> CheckResult:
     """Write a new baseline at ``path`` for every scene x strategy, with MIS references.
 
@@ -795,7 +809,7 @@ def create_baseline(
         used_names.add(unique)
         prepared.append((key, file, f"references/{unique}.exr"))
     entries = [Entry(scene=key, strategy=name, heuristic=heuristic, spp=spp, seeds=list(range(1, seeds + 1)),
-                     downsample=1, reference=ref)
+                     downsample=1, reference=ref, sampler=sampler)
                for key, _, ref in prepared for name, heuristic in strategies]
     for e in entries:
         try:
@@ -803,9 +817,9 @@ def create_baseline(
         except ValueError as exc:
             raise InputError(str(exc), "--strategies") from None
     level = test_level(len(entries))
-    if smallest_p(seeds, spp) >= level:
+    if smallest_p(seeds, spp, sampler) >= level:
         raise InputError(f"{seeds} seeds are too few for the rank tests of {len(entries)} entries (they "
-                         f"could never fail): use at least {seeds_needed(level, spp)}", "--seeds")
+                         f"could never fail): use at least {seeds_needed(level, spp, sampler)}", "--seeds")
     if reference_spp < 2:
         raise InputError("a reference needs at least 2 samples per pixel (its variance is used)",
                          "--reference-spp")

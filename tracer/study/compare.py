@@ -42,8 +42,9 @@ from ..estimators import DirectLighting
 from ..film import Film
 from ..record import MAX_SAMPLE_INDEX, MAX_SEED
 from ..render_loop import RenderResult, RenderSettings, render_complete
+from ..sampler_choice import DEFAULT_SAMPLER
 from ..scene import Scene, load_scene
-from ..strategy import Strategy
+from ..strategy import DEFAULT_LIGHT_SAMPLING, Strategy
 from . import metrics
 
 
@@ -137,9 +138,24 @@ CONFIDENCE = 0.95
 EXTRAPOLATION_LIMIT = 4.0
 
 
+def method_name(strategy: Strategy, sampler: str = DEFAULT_SAMPLER) -> str:
+    """A file-name-safe label of a strategy and sampler: ``mis``, ``mis_l3_b1``, ``light_x4``,
+    ``light_solid-angle``, ``mis_sobol`` ... (the defaults are left out)."""
+    count = strategy.light_count or strategy.direction_count
+    if strategy.name == "mis" and (strategy.light_samples, strategy.bsdf_samples) != (1, 1):
+        name = f"mis_l{strategy.light_samples}_b{strategy.bsdf_samples}"
+    else:
+        name = strategy.name if count == 1 else f"{strategy.name}_x{count}"
+    if strategy.light_count and strategy.light_sampling != DEFAULT_LIGHT_SAMPLING:
+        name += f"_{strategy.light_sampling}"
+    if sampler != DEFAULT_SAMPLER:
+        name += f"_{sampler}"
+    return name
+
+
 @dataclass
 class Run:
-    """One strategy's render and its measures against the reference."""
+    """One strategy's render (with one sampler) and its measures against the reference."""
 
     strategy: Strategy
     film: Film
@@ -150,6 +166,11 @@ class Run:
     clock: str = "wall"
     wall_seconds: float | None = None  # both clocks, whichever the comparison uses
     cpu_seconds: float | None = None
+    sampler: str = DEFAULT_SAMPLER
+
+    @property
+    def name(self) -> str:
+        return method_name(self.strategy, self.sampler)
 
     @property
     def spp(self) -> int:
@@ -231,14 +252,14 @@ class Comparison:
         """The reference's own noise on the relMSE scale (what the measures subtract)."""
         return metrics.reference_relmse(self.reference.mean, self.reference_variance)
 
-    def equal_spp(self, strategy: Strategy, spp: int) -> Run:
-        """Render ``spp`` samples per pixel."""
-        result, seconds, cpu = self._render(strategy, RenderSettings(spp=spp, seed=self.seed,
-                                                                     threads=self.threads),
-                                            None, self._estimator(strategy), self.progress)
+    def equal_spp(self, strategy: Strategy, spp: int, sampler: str = DEFAULT_SAMPLER) -> Run:
+        """Render ``spp`` samples per pixel with ``sampler``."""
+        settings = RenderSettings(spp=spp, seed=self.seed, threads=self.threads, sampler=sampler)
+        result, seconds, cpu = self._render(strategy, settings, None, self._estimator(strategy),
+                                            self.progress)
         run = self._measure(Run(strategy, result.film, seconds, result.nonfinite, clock=self.clock,
-                                wall_seconds=result.seconds, cpu_seconds=cpu))
-        self._say(f"  {strategy.label}: {run.spp} spp, {run.seconds:.2f} {self.unit}, "
+                                wall_seconds=result.seconds, cpu_seconds=cpu, sampler=sampler))
+        self._say(f"  {_described(strategy, sampler)}: {run.spp} spp, {run.seconds:.2f} {self.unit}, "
                   f"relMSE {run.measures['relmse']:.4g}")
         return run
 
@@ -247,12 +268,14 @@ class Comparison:
         """How seconds on this comparison's clock are shown: ``s`` or ``CPU s``."""
         return "CPU s" if self.clock == "cpu" else "s"
 
-    def equal_time(self, strategy: Strategy, budget: float) -> Run:
+    def equal_time(self, strategy: Strategy, budget: float, sampler: str = DEFAULT_SAMPLER) -> Run:
         """Render as many whole spp as fit in ``budget`` seconds of the comparison's clock.
 
         Passes are sized to about half of the time left, from the measured time per spp, and
         the render stops when less than half a pass of 1 spp remains; so the spent time ends
-        within about half the time of one spp of the budget.
+        within about half the time of one spp of the budget. Each pass draws the next sample
+        indices: a Sobol replicate continues its sequence, a stratified one adds a set
+        stratified on its own (``tracer.samplers``).
         """
         estimator = self._estimator(strategy)
         film, spent, spp, nonfinite, per_spp = None, 0.0, 0, 0, None
@@ -265,7 +288,8 @@ class Comparison:
                 if left < 0.5 * per_spp:
                     break
                 chunk = max(1, int(0.5 * left / per_spp)) if left > 2 * per_spp else 1
-            settings = RenderSettings(spp=chunk, seed=self.seed, threads=self.threads, first_sample=spp)
+            settings = RenderSettings(spp=chunk, seed=self.seed, threads=self.threads, first_sample=spp,
+                                      sampler=sampler)
             result, seconds, chunk_cpu = self._render(strategy, settings, film, estimator)
             film, spp = result.film, spp + chunk
             spent += seconds
@@ -274,28 +298,34 @@ class Comparison:
             nonfinite += result.nonfinite
             per_spp = spent / spp
         run = self._measure(Run(strategy, film, spent, nonfinite, budget=budget, clock=self.clock,
-                                wall_seconds=wall, cpu_seconds=cpu))
-        self._say(f"  {strategy.label}: {run.spp} spp in {run.seconds:.2f} {self.unit} of {budget:.2f}, "
-                  f"relMSE {run.measures['relmse']:.4g}")
+                                wall_seconds=wall, cpu_seconds=cpu, sampler=sampler))
+        self._say(f"  {_described(strategy, sampler)}: {run.spp} spp in {run.seconds:.2f} {self.unit} of "
+                  f"{budget:.2f}, relMSE {run.measures['relmse']:.4g}")
         return run
 
     def convergence(self, strategy: Strategy, max_spp: int | None = None,
-                    budget: float | None = None, seed: int | None = None) -> list[dict[str, Any]]:
+                    budget: float | None = None, seed: int | None = None,
+                    sampler: str = DEFAULT_SAMPLER) -> list[dict[str, Any]]:
         """relMSE and cumulative seconds (on the comparison's clock) at spp 1, 2, 4, ... up to
         ``max_spp`` (or until the time ``budget`` is spent), for one ``seed`` (default: the
-        comparison's). One progressive render: each point adds samples to the last."""
+        comparison's). One progressive render: each point adds samples to the last (so each
+        Sobol replicate holds 2^k points of its sequence at every point from 8 spp on, and a
+        stratified replicate a stratified set per doubling). Points are named by
+        :func:`method_name`."""
         seed = self.seed if seed is None else seed
         estimator = self._estimator(strategy)
         points: list[dict[str, Any]] = []
         film, spp, spent = None, 0, 0.0
         target = 1
         while (max_spp is None or target <= max_spp):
-            settings = RenderSettings(spp=target - spp, seed=seed, threads=self.threads, first_sample=spp)
+            settings = RenderSettings(spp=target - spp, seed=seed, threads=self.threads, first_sample=spp,
+                                      sampler=sampler)
             result, seconds, _ = self._render(strategy, settings, film, estimator)
             film, spp = result.film, target
             spent += seconds
             rel = metrics.relmse(film.mean, self.reference.mean, self.reference_variance)
-            points.append({"strategy": strategy.name, "heuristic": strategy.recorded_heuristic, "seed": seed,
+            points.append({"name": method_name(strategy, sampler), "strategy": strategy.name,
+                           "heuristic": strategy.recorded_heuristic, "sampler": sampler, "seed": seed,
                            "spp": spp, "seconds": spent, "relmse": rel,
                            "efficiency": metrics.efficiency(rel, spent)})
             if budget is not None and spent * 2.0 > budget:  # the next doubling would overshoot
@@ -304,18 +334,24 @@ class Comparison:
         return points
 
     def sweep(self, strategy: Strategy, seeds: list[int], max_spp: int | None = None,
-              budget: float | None = None) -> list[dict[str, Any]]:
+              budget: float | None = None, sampler: str = DEFAULT_SAMPLER) -> list[dict[str, Any]]:
         """:meth:`convergence` once per seed, every seed up to the same spp: the first seed's
         sweep decides it (``max_spp``, or as far as the ``budget`` goes), so that each point
         has every seed and the mean over seeds is taken at the same spp."""
-        points = self.convergence(strategy, max_spp, budget, seeds[0])
+        points = self.convergence(strategy, max_spp, budget, seeds[0], sampler)
         last = points[-1]["spp"]
         for seed in seeds[1:]:
-            points += self.convergence(strategy, last, None, seed)
+            points += self.convergence(strategy, last, None, seed, sampler)
         spent = sum(p["seconds"] for p in points if p["spp"] == last)
-        self._say(f"  sweep {strategy.label}: {len(seeds)} seeds x {len(points) // len(seeds)} points up to "
+        per_seed = len(points) // len(seeds)
+        self._say(f"  sweep {_described(strategy, sampler)}: {len(seeds)} seeds x {per_seed} points up to "
                   f"{last} spp, {spent:.2f} {self.unit}")
         return points
+
+
+def _described(strategy: Strategy, sampler: str) -> str:
+    """The strategy's label, and the sampler unless it is the default."""
+    return strategy.label + ("" if sampler == DEFAULT_SAMPLER else f", {sampler} sampler")
 
 
 def fit_convergence(points: list[dict[str, float]], x: str) -> tuple[float, float]:
@@ -404,11 +440,13 @@ class SweepCurve:
 
 def sweep_curves(points: list[dict[str, Any]]) -> dict[str, SweepCurve]:
     """The sweep's points (``Comparison.sweep``'s dicts, any strategies and seeds) as one
-    :class:`SweepCurve` per strategy, in order of first appearance. Points without a seed
+    :class:`SweepCurve` per method (``name``: strategy, light sampling and sampler; the
+    strategy for points without one), in order of first appearance. Points without a seed
     count as one seed."""
     curves = {}
-    for name in dict.fromkeys(p["strategy"] for p in points):
-        mine = [p for p in points if p["strategy"] == name]
+    named = [{**p, "name": p.get("name", p["strategy"])} for p in points]
+    for name in dict.fromkeys(p["name"] for p in named):
+        mine = [p for p in named if p["name"] == name]
         seeds = list(dict.fromkeys(p.get("seed") for p in mine))
         by_seed = [{p["spp"]: p for p in mine if p.get("seed") == seed} for seed in seeds]
         spp = sorted(set.intersection(*(set(b) for b in by_seed)))
@@ -545,7 +583,7 @@ def run_row(run: Run) -> dict[str, object]:
     row: dict[str, object] = {"strategy": run.strategy.name, "heuristic": run.strategy.recorded_heuristic,
                               "light_samples": run.strategy.light_count,
                               "bsdf_samples": run.strategy.direction_count,
-                              "light_sampling": run.strategy.recorded_light_sampling,
+                              "light_sampling": run.strategy.recorded_light_sampling, "sampler": run.sampler,
                               "spp": run.spp, "seconds": run.seconds, "clock": run.clock,
                               "wall_seconds": run.wall_seconds, "cpu_seconds": run.cpu_seconds}
     row.update(run.measures)

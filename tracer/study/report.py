@@ -56,18 +56,9 @@ def _pyplot():
 
 
 def run_name(run: Run) -> str:
-    """A file-name-safe label: ``mis``, ``mis_l3_b1``, ``light_x4``, ``light_solid-angle`` ..."""
-    from ..strategy import DEFAULT_LIGHT_SAMPLING
-
-    s = run.strategy
-    count = s.light_count or s.direction_count
-    if s.name == "mis" and (s.light_samples, s.bsdf_samples) != (1, 1):
-        name = f"mis_l{s.light_samples}_b{s.bsdf_samples}"
-    else:
-        name = s.name if count == 1 else f"{s.name}_x{count}"
-    if s.light_count and s.light_sampling != DEFAULT_LIGHT_SAMPLING:
-        name += f"_{s.light_sampling}"
-    return name
+    """A file-name-safe label: ``mis``, ``mis_l3_b1``, ``light_x4``, ``light_solid-angle``,
+    ``mis_sobol`` ... (``compare.method_name``)."""
+    return run.name
 
 
 # ---------------------------------------------------------------------------------------------
@@ -383,8 +374,8 @@ def write_tables(out: Path, document: dict[str, Any]) -> None:
     metrics.csv (the results table; undefined numbers are empty cells)."""
     safe = json_safe(document)
     write_text(out / "metrics.json", json.dumps(safe, indent=2, allow_nan=False) + "\n")
-    columns = ["name", "strategy", "heuristic", "light_samples", "bsdf_samples", "light_sampling", "spp",
-               "seconds", "budget", "clock",
+    columns = ["name", "strategy", "heuristic", "light_samples", "bsdf_samples", "light_sampling", "sampler",
+               "spp", "seconds", "budget", "clock",
                "wall_seconds", "cpu_seconds", "mse", "relmse", "variance", "efficiency", "flip",
                "mse_uncorrected", "relmse_uncorrected"]
     table = io.StringIO()
@@ -540,7 +531,8 @@ def result_row(run: Run, flip: float) -> dict[str, Any]:
 def efficiency_pairs(runs: list[Run]) -> list[tuple[Run, Run]]:
     """The pairs whose ratio map is most telling: light vs BSDF (where each wins), then MIS
     against each of them (each strategy's first run), then every other light-sampling technique
-    of a strategy against its first (where solid angle beats area sampling, and where not)."""
+    and sampler of a strategy against its first (where solid angle beats area sampling, or
+    Sobol points independent ones, and where not)."""
     first: dict[str, Run] = {}
     for r in runs:
         first.setdefault(r.strategy.name, r)

@@ -34,6 +34,7 @@ from ..atomic import save_figure, write_text
 from ..estimators import DirectLighting
 from ..film import Film
 from ..render_loop import RenderSettings, render_complete
+from ..sampler_choice import DEFAULT_SAMPLER
 from ..scene import Scene, load_scene
 from ..strategy import STRATEGIES, Strategy
 from . import metrics, statistics
@@ -152,8 +153,11 @@ def run_case(
     seed: int = 0,
     threads: int = 2,
     reference_spp: int = REFERENCE_SPP,
+    sampler: str = DEFAULT_SAMPLER,
 ) -> list[Cell]:
-    """Every strategy on one case, against a ``reference_spp`` MIS render of it."""
+    """Every strategy on one case, rendered with ``sampler``, against a ``reference_spp`` MIS
+    render of it (independent samples). The image-mean z-test reads the variance channel,
+    which every sampler keeps honest (``tracer.film``)."""
     # The reference always takes 1 light + 1 BSDF sample, so that a sample count that changes
     # the expected value (an image that brightens with the count) shows as bias.
     reference = render_complete(
@@ -161,7 +165,7 @@ def run_case(
     ).film
     cells = []
     for column, name, sampling in COLUMNS:
-        settings = RenderSettings(spp=spp, seed=seed, threads=threads)
+        settings = RenderSettings(spp=spp, seed=seed, threads=threads, sampler=sampler)
         result = render_complete(scene, case.strategy(name, light_sampling=sampling), settings)
         film = result.film
         cells.append(
@@ -232,15 +236,17 @@ def run_suite(
     threads: int = 2,
     stream=None,
     reference_spp: int = REFERENCE_SPP,
+    sampler: str = DEFAULT_SAMPLER,
 ) -> dict[str, Any]:
-    """Run every case; write stability.json and stability.png into ``out`` if given."""
+    """Run every case with ``sampler``; write stability.json and stability.png into ``out`` if
+    given."""
     stream = stream if stream is not None else sys.stderr
     cells: list[Cell] = []
     veach: dict[str, dict[str, Any]] = {}
     for case in cases(size):
         start = time.perf_counter()
         scene = load_case(case)
-        cells += run_case(case, scene, spp, seed, threads, reference_spp)
+        cells += run_case(case, scene, spp, seed, threads, reference_spp, sampler)
         if case.veach:
             veach[case.name] = veach_bound(case, scene, seed=seed)
         print(f"  {case.name}: {time.perf_counter() - start:.1f} s", file=stream)
@@ -248,6 +254,7 @@ def run_suite(
         "spp": spp,
         "size": size,
         "reference_spp": reference_spp,
+        "sampler": sampler,
         "cases": {c.name: c.description for c in cases(size)},
         "cells": [c.__dict__ for c in cells],
         "veach_bound": veach,
