@@ -1345,7 +1345,8 @@ OPTION_VARIANTS: tuple[tuple[str, ...], ...] = tuple(
        ("--light-samples", "4", "--bsdf-samples", "3"), ("--one-sample",),
        ("--one-sample", "--light-samples", "0"),
        ("--one-sample", "--strategy", "light"), ("--light-selection", "uniform"),
-       ("--strategy", "light", "--light-samples", "0")]
+       ("--strategy", "light", "--light-samples", "0"), ("--sampler", "sobol"), ("--sampler", "stratified"),
+       ("--sampler", "halton"), ("--sampler", "sobol", "--spp", "34359738369")]
     + [("--seed", v) for v in ("4294967296", "18446744073709551615", "18446744073709551616",
                                 "99999999999999999999999999", "-1", "1e3")]
     + [("--exposure", v) for v in ("100", "-100", "100.0001", "nan", "inf", "1e309", "-0", "abc")]
@@ -1642,7 +1643,7 @@ def make_exr_case(seed: int, index: int, root: Path, base: Path) -> Case:
     folder.mkdir(parents=True)
     copy_mesh_files(folder)
     shutil.copy(ROOT / "tracer" / "scenes" / "cornell.toml", folder / "cornell.toml")
-    kind = rng.choice(("render", "reference"))
+    kind = rng.choice(("render", "reference", "sobol"))
     source, partner = (base / f"{kind}_a.exr", base / f"{kind}_b.exr")
     if rng.random() < 0.5:
         source, partner = partner, source
@@ -1821,15 +1822,18 @@ def make_baseline_case(seed: int, index: int, root: Path, base: Path) -> Case:
 
 
 def make_base_renders(base: Path, timeout: float) -> None:
-    """Good render EXRs (two seeds) and MIS references (two seeds) of cornell at 8 x 8: the
-    material EXR cases damage. Also warms numba's cache (compiling after an edit takes ~20 s)."""
+    """Good render EXRs (two seeds), MIS references (two seeds) and Sobol renders (two seeds,
+    with their replicate layers) of cornell at 8 x 8: the material EXR cases damage. Also warms
+    numba's cache (compiling after an edit takes ~100 s)."""
     base.mkdir(parents=True, exist_ok=True)
     scene = str(ROOT / "tracer" / "scenes" / "cornell.toml")
     small = ["--width", "8", "--height", "8", "--threads", "1", "--quiet"]
     commands = [["render", scene, "-o", "render_a.exr", "--spp", "4", "--seed", "1", *small],
                 ["render", scene, "-o", "render_b.exr", "--spp", "4", "--seed", "2", *small],
                 ["reference", scene, "-o", "reference_a.exr", "--spp", "8", "--seed", "3", *small],
-                ["reference", scene, "-o", "reference_b.exr", "--spp", "8", "--seed", "4", *small]]
+                ["reference", scene, "-o", "reference_b.exr", "--spp", "8", "--seed", "4", *small],
+                *(["render", scene, "-o", f"sobol_{part}.exr", "--spp", "16", "--seed", seed,
+                   "--sampler", "sobol", *small] for part, seed in (("a", "5"), ("b", "6")))]
 
     def make(argv: list[str]) -> subprocess.CompletedProcess:
         return subprocess.run([sys.executable, "-m", "tracer", *argv], cwd=base, capture_output=True,

@@ -12,9 +12,9 @@ pairs are decorrelated from each other, as in pbrt-v3's ``StratifiedSampler``.
 
 The permutation is a keyed bijection of the integers below the next power of two, walked in
 cycles until it lands below ``nx ny`` (cycle walking), then rotated by a uniform random offset:
-the rotation keeps the cells distinct and makes each point's cell exactly uniform whatever the
-bijection's quality, so every point is uniform and every estimate unbiased, also when a render
-stops early and a pixel holds only some of its points.
+the rotation keeps the cells distinct and makes each point's cell uniform (to within
+``nx ny / 2^32``) whatever the bijection's quality, so every point is uniform and every
+estimate unbiased, also when a render stops early and a pixel holds only some of its points.
 
 The grid depends on the render's spp, so the points depend on (seed, pixel, sample index,
 dimension) and on the render's first sample and spp; a resume adds a new stratified set per
@@ -45,9 +45,12 @@ def grid(points: int) -> tuple[int, int]:
 
 @jit
 def permute(j: int, n: int, key: np.uint64) -> int:
-    """Element j (0 <= j < n) of a random permutation of 0 .. n - 1 keyed by ``key``."""
+    """Element j (0 <= j < n) of a random permutation of 0 .. n - 1 keyed by ``key``. (A j
+    outside that range is taken modulo n: the walk below returns below n only from below n.)"""
     if n <= 1:
         return 0
+    if j < 0 or j >= n:
+        j %= n
     bits = 1
     while (1 << bits) < n:
         bits += 1
@@ -67,8 +70,13 @@ def permute(j: int, n: int, key: np.uint64) -> int:
         w ^= w >> half
         if w < np.uint64(n):
             break
-    offset = mix64(key ^ np.uint64(0x5DEECE66D)) % np.uint64(n)
-    return int((w + offset) % np.uint64(n))
+    # The rotation by a uniform offset (Lemire's multiply-shift: uniform to within n / 2^32,
+    # without a division) makes each point's cell uniform whatever the bijection's quality.
+    offset = ((mix64(key ^ np.uint64(0x5DEECE66D)) >> np.uint64(32)) * np.uint64(n)) >> np.uint64(32)
+    cell = w + offset
+    if cell >= np.uint64(n):
+        cell -= np.uint64(n)
+    return np.int64(cell)
 
 
 @jit
