@@ -18,8 +18,9 @@ hash-based Owen scrambling", JCGT 9(4)): in bit-reversed order, adding a seed an
 products by even constants changes a bit only according to the bits below it (the digits above
 it in the original order), so the map is a nested scramble; over a uniform 32-bit seed each
 scrambled value is uniform, because for a fixed input the seed's bits reach the output through
-a triangular, invertible map. The 32 digits so scrambled are followed by 21 independent random
-bits, as the infinitely many digits of a full Owen scramble would be.
+a triangular, invertible map. The 32 digits so scrambled are followed by 21 further random
+bits (from a product of the pair's hash and the index), as the infinitely many digits of a full
+Owen scramble would be.
 
 Replicates: sample ``s`` of a pixel is point ``s // R`` of replicate ``s % R`` (``R`` =
 ``tracer.samplers.REPLICATES``), each replicate an independently scrambled copy of the
@@ -46,6 +47,8 @@ _S21, _S43, _S32 = np.uint64(21), np.uint64(43), np.uint64(32)
 # product carries each bit only upward.
 _LK = (np.uint64(0x6C50B47C), np.uint64(0xB82F1E52), np.uint64(0xC7AFE638), np.uint64(0x8D22F6E6))
 _LOW21 = np.uint64((1 << 21) - 1)
+_S22 = np.uint64(22)
+_LOW_MIX = np.uint64(0xBF58476D1CE4E5B9)  # odd: its product carries the pair's and index's bits up
 
 
 @jit
@@ -98,6 +101,16 @@ def _second_axis_tables() -> np.ndarray:
 
 
 _SECOND_AXIS = _second_axis_tables()
+# The same in bit-reversed order (reversal is linear over XOR), which is the order the scramble
+# works in: one reversal fewer per point.
+_SECOND_AXIS_REVERSED = np.array([[int(f"{v:032b}"[::-1], 2) for v in row] for row in _SECOND_AXIS],
+                                 dtype=np.uint64)
+
+
+@jit
+def _xor_of_bytes(table: np.ndarray, index: np.uint64) -> np.uint64:
+    return (table[0, index & _BYTE] ^ table[1, (index >> _S8) & _BYTE]
+            ^ table[2, (index >> _S16) & _BYTE] ^ table[3, (index >> _S24) & _BYTE])
 
 
 @jit
@@ -106,30 +119,44 @@ def sobol_bits(index: np.uint64, axis: int) -> np.uint64:
     or 1): axis 0 is van der Corput's radical inverse, axis 1 ``_second_axis_tables``."""
     if axis == 0:
         return reverse_bits32(index)
-    return (_SECOND_AXIS[0, index & _BYTE] ^ _SECOND_AXIS[1, (index >> _S8) & _BYTE]
-            ^ _SECOND_AXIS[2, (index >> _S16) & _BYTE] ^ _SECOND_AXIS[3, (index >> _S24) & _BYTE])
+    return _xor_of_bytes(_SECOND_AXIS, index)
+
+
+@jit
+def _pair_point(key: np.uint64, index: int, dim: int, both: bool):
+    """The scrambled 32-bit coordinates of the pair that holds ``dim`` (the second only if
+    ``both``, else 0) and 64 random bits for the low digits.
+
+    The pair's 64-bit hash gives the index shuffle its seed (low 32 bits) and the first
+    coordinate's scramble (high 32 bits); the high half of its product with an odd constant
+    the second coordinate's; the low digits come from a product of the pair's hash and the
+    index (digits below 2^-32 need no more)."""
+    pair = mix64(key + np.uint64(dim // 2 + 1) * GOLDEN_GAMMA)
+    shuffled = nested_scramble(np.uint64(index), pair & _M32)
+    # Axis 0 is the bit reversal of the index, so its scramble reverse(lk(reverse(.))) is lk(.) reversed.
+    x = reverse_bits32(_lk_permutation(shuffled, pair >> _S32))
+    y = np.uint64(0)
+    if both:
+        y = reverse_bits32(_lk_permutation(_xor_of_bytes(_SECOND_AXIS_REVERSED, shuffled),
+                                           (pair * GOLDEN_GAMMA) >> _S32))
+    low = (pair ^ (np.uint64(index) * GOLDEN_GAMMA)) * _LOW_MIX
+    return x, y, low
 
 
 @jit
 def uniform_pair(key: np.uint64, index: int, dim: int):
     """Dimensions ``dim`` and ``dim + 1`` (``dim`` even: a pair) of point ``index`` of the
-    replicate whose key is ``key``: a point of [0, 1)^2.
-
-    The pair's 64-bit hash gives the index shuffle its seed (low 32 bits) and the first
-    coordinate's scramble (high 32 bits); a second hash the second coordinate's, and a hash of
-    the pair and the index the 21 low random bits of both."""
-    pair = mix64(key + np.uint64(dim // 2 + 1) * GOLDEN_GAMMA)
-    shuffled = nested_scramble(np.uint64(index), pair & _M32)
-    # Axis 0 is the bit reversal of the index, so its scramble reverse(lk(reverse(.))) is lk(.) reversed.
-    x = reverse_bits32(_lk_permutation(shuffled, pair >> _S32))
-    y = nested_scramble(sobol_bits(shuffled, 1), mix64(pair) & _M32)
-    low = mix64(pair + np.uint64(index) * GOLDEN_GAMMA)
+    replicate whose key is ``key``: a point of [0, 1)^2."""
+    x, y, low = _pair_point(key, index, dim, True)
     return (float(np.int64((x << _S21) | (low >> _S43))) * _TO_UNIT,
-            float(np.int64((y << _S21) | (low & _LOW21))) * _TO_UNIT)
+            float(np.int64((y << _S21) | ((low >> _S22) & _LOW21))) * _TO_UNIT)
 
 
 @jit
 def uniform(key: np.uint64, index: int, dim: int) -> float:
-    """Dimension ``dim`` of point ``index`` of the replicate whose key is ``key``: in [0, 1)."""
-    u = uniform_pair(key, index, dim - (dim & 1))
-    return u[dim & 1]
+    """Dimension ``dim`` of point ``index`` of the replicate whose key is ``key``: in [0, 1)
+    (the pair's other coordinate is not computed when ``dim`` is its first)."""
+    if dim & 1:
+        return uniform_pair(key, index, dim - 1)[1]
+    x, _, low = _pair_point(key, index, dim, False)
+    return float(np.int64((x << _S21) | (low >> _S43))) * _TO_UNIT
