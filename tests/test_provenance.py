@@ -181,8 +181,8 @@ def test_an_interrupted_render_records_the_samples_it_drew(monkeypatch):
     real_add = Film.add_block
     calls = []
 
-    def add_then_interrupt(self, first_pixel, samples):
-        real_add(self, first_pixel, samples)
+    def add_then_interrupt(self, first_pixel, samples, first_sample=0):
+        real_add(self, first_pixel, samples, first_sample)
         calls.append(first_pixel)
         if len(calls) == 3:
             raise KeyboardInterrupt
