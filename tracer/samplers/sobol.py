@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..jit import jit
+from ..jit import jit, jit_called
 from .independent import GOLDEN_GAMMA, mix64
 
 NAME = "sobol"
@@ -143,7 +143,7 @@ def _pair_point(key: np.uint64, index: int, dim: int, both: bool):
     return x, y, low
 
 
-@jit
+@jit_called
 def uniform_pair(key: np.uint64, index: int, dim: int):
     """Dimensions ``dim`` and ``dim + 1`` (``dim`` even: a pair) of point ``index`` of the
     replicate whose key is ``key``: a point of [0, 1)^2."""
@@ -152,7 +152,7 @@ def uniform_pair(key: np.uint64, index: int, dim: int):
             float(np.int64((y << _S21) | ((low >> _S22) & _LOW21))) * _TO_UNIT)
 
 
-@jit
+@jit_called
 def uniform(key: np.uint64, index: int, dim: int) -> float:
     """Dimension ``dim`` of point ``index`` of the replicate whose key is ``key``: in [0, 1)
     (the pair's other coordinate is not computed when ``dim`` is its first)."""

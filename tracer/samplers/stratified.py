@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from ..jit import jit
+from ..jit import jit, jit_called
 from .independent import GOLDEN_GAMMA, mix64
 
 NAME = "stratified"
@@ -79,7 +79,7 @@ def permute(j: int, n: int, key: np.uint64) -> int:
     return np.int64(cell)
 
 
-@jit
+@jit_called
 def uniform_pair(key: np.uint64, j: int, dim: int, nx: int, ny: int):
     """Dimensions ``dim`` and ``dim + 1`` (``dim`` even) of point ``j`` of a replicate's
     stratified set (key ``key``): its cell of the pair's permutation, jittered uniformly."""
@@ -91,7 +91,7 @@ def uniform_pair(key: np.uint64, j: int, dim: int, nx: int, ny: int):
     return min(ux, _ONE_BELOW), min(uy, _ONE_BELOW)
 
 
-@jit
+@jit_called
 def uniform(key: np.uint64, j: int, dim: int, nx: int, ny: int) -> float:
     """Dimension ``dim`` of point ``j`` of a replicate's stratified set (key ``key``)."""
     u = uniform_pair(key, j, dim - (dim & 1), nx, ny)
