@@ -11,13 +11,18 @@ each replicate's count and mean. Their samples are not independent within a pixe
 per-sample variance, n x the variance of the pixel mean estimated from the R independent
 replicate means ``Y_r`` (counts ``n_r``, weights ``w_r = n_r / n``):
 
-    Var(mean) ~= R' / (R' - 1) sum_r w_r^2 (Y_r - mean)^2     (over the R' replicates with samples)
+    Var(mean) ~= sum_r w_r^2 (Y_r - mean)^2 / (1 - sum_r w_r^2)
 
 which is the usual unbiased ``s^2 / R`` of the replicate means when the counts are equal, so
-that ``variance / count`` is the error of the pixel value for every sampler. Merges add
-replicate r of one film to replicate r of the other: both hold points of replicate r's own
-randomization (the same sequence continued, or another seed's independent one), and different
-replicates stay independent, so the estimate stays unbiased after any number of merges.
+that ``variance / count`` is the error of the pixel value for every sampler; with unequal
+counts (an spp that is not a multiple of R, a pass cut short, pools of renders of fewer than R
+spp) it is unbiased when a replicate's variance falls as 1 / n_r, and close otherwise (the
+factor R' / (R' - 1) instead would be 22% low for counts 8, 1, ..., 1). Where one replicate
+holds every sample (pools of 1-spp renders) there is nothing to compare: the per-sample
+spread M2 / (n - 1) stands in, which for these samplers overstates the error rather than
+hide it. Merges add replicate r of one film to replicate r of the other: both hold points of
+replicate r's own randomization (the same sequence continued, or another seed's independent
+one), and different replicates stay independent.
 
 Files are elsewhere: ``tracer.imagefiles`` (the EXR contract and PNG previews).
 """
@@ -108,7 +113,7 @@ class Film:
         with replicates the effective per-sample variance from the replicate means (module
         docstring). 0 where there are fewer than 2 samples (or replicates with samples)."""
         if self.replicates:
-            return _replicate_variance(self.count, self.rep_count, self.rep_mean)
+            return _replicate_variance(self.count, self.rep_count, self.rep_mean, self.m2)
         denom = np.maximum(self.count - 1, 1).astype(np.float64)[:, None]
         return np.where((self.count >= 2)[:, None], self.m2 / denom, 0.0)
 
@@ -168,15 +173,19 @@ def _merge(count, mean, m2, n_b, mean_b, m2_b) -> None:
         _fold(count, mean, m2, pixel, n_b[pixel], mean_b[pixel], m2_b[pixel])
 
 
-def _replicate_variance(count: np.ndarray, rep_count: np.ndarray, rep_mean: np.ndarray) -> np.ndarray:
+def _replicate_variance(count: np.ndarray, rep_count: np.ndarray, rep_mean: np.ndarray,
+                        m2: np.ndarray) -> np.ndarray:
     """(P, 3) effective per-sample variance n x Var(mean) from replicate counts ``(P, R)`` and
-    means ``(P, R, 3)`` (module docstring)."""
+    means ``(P, R, 3)`` (module docstring); where one replicate holds every sample, the
+    per-sample spread ``m2 (P, 3)`` / (n - 1) instead."""
     n = np.maximum(count, 1).astype(np.float64)[:, None]
     w = rep_count / n  # (P, R)
     pooled = np.einsum("pr,prc->pc", w, rep_mean)
-    used = (rep_count > 0).sum(axis=1)[:, None].astype(np.float64)  # R'
     spread = np.einsum("pr,prc->pc", w * w, (rep_mean - pooled[:, None, :]) ** 2)
-    var_mean = np.where(used >= 2, used / np.maximum(used - 1, 1) * spread, 0.0)
+    share = 1.0 - np.sum(w * w, axis=1)[:, None]  # 0 where one replicate holds every sample
+    spread_of_samples = m2 / np.maximum(n - 1.0, 1.0) / n
+    var_mean = np.where(share > 1e-12, spread / np.where(share > 1e-12, share, 1.0),
+                        np.where(n >= 2, spread_of_samples, 0.0))
     return n * var_mean
 
 

@@ -30,12 +30,13 @@ from .atomic import atomic_write
 from .errors import InputError
 from .film import Film
 from .record import RenderRecord
+from .sampler_choice import MAX_REPLICATE_COUNT, max_samples, replicates_of
 
 CHANNELS = ("R", "G", "B", "variance.R", "variance.G", "variance.B")
 COUNT_CHANNEL = "samples"
 SPP_ATTRIBUTE = "tracer:spp"
 REPLICATE_LAYER = "replicate{}"
-MAX_REPLICATE_COUNT = 2**24  # counts in float32 channels stay exact below this
+FLOAT32_MAX = 3.4028234e38
 HALF_MAX = 65504.0  # the largest finite 16-bit float
 MAX_COUNT = 2**53  # sample counts stay exact in float64
 
@@ -56,7 +57,7 @@ def write_exr(path: str | os.PathLike[str], film: Film, half: bool = False) -> N
     if not film.uniform:
         planes.append(film.count[:, None].astype(np.float64))
     if film.replicates:
-        if film.rep_count.size and int(film.rep_count.max()) >= MAX_REPLICATE_COUNT:
+        if film.rep_count.size and int(film.rep_count.max()) > MAX_REPLICATE_COUNT:
             raise InputError(f"a replicate holds {int(film.rep_count.max())} samples, more than the "
                              f"{MAX_REPLICATE_COUNT} a 32-bit float counts exactly; nothing was written",
                              str(path))
@@ -141,17 +142,22 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
         # the file holds is unknown, so it may be read and compared with but not pooled.
         record.samples = None
     m2 = var * np.maximum(count - 1, 0)[:, None]
+    limit = max_samples(record.sampler or "independent")
+    if record.samples and max(n for _, _, n in record.samples) > limit:
+        raise InputError(f"header attribute tracer:samples lists sample indices beyond the "
+                         f"{limit} the {record.sampler} sampler draws", path)
     film = Film(spec.width, spec.height, count, mean, m2, record)
-    _read_replicates(film, names, data, path)
+    _read_replicates(film, names, data, path, _means_are_half(spec))
     return film
 
 
-def _read_replicates(film: Film, names: list[str], data: np.ndarray, path: str) -> None:
-    """Attach the replicate layers of a file whose sampler has replicates, checked: every layer
-    present with whole counts that add up to the pixel's count and finite means. A file of such
-    a sampler without them (another tool's) keeps its variance channel and cannot be pooled."""
-    from .sampler_choice import replicates_of
-
+def _read_replicates(film: Film, names: list[str], data: np.ndarray, path: str, half: bool) -> None:
+    """Attach the replicate layers of a file whose sampler has replicates, checked against the
+    rest of the file: every layer present; whole counts that add up to the pixel's count and
+    that the listed sample ranges can hold (replicate r holds the indices s with s % R = r);
+    finite means that pool to the pixel mean (to the precision of the stored means: ``half``);
+    a variance they give that a 32-bit float holds. A file of such a sampler without them
+    (another tool's) keeps its variance channel and cannot be pooled."""
     replicates = replicates_of(film.record.sampler)
     layers = [REPLICATE_LAYER.format(r) for r in range(replicates)]
     found = [n for n in names if n.startswith("replicate")]
@@ -170,12 +176,33 @@ def _read_replicates(film: Film, names: list[str], data: np.ndarray, path: str) 
     if bad.any():
         raise InputError(f"replicate counts are not whole numbers adding up to the pixel's sample count at "
                          f"{_pixel(bad, film.width)}", path)
+    if film.record.samples is not None:
+        # How many listed indices fall in each replicate: #{s in [first, next): s = r mod R}.
+        room = [sum((n - 1 - r) // replicates - (f - 1 - r) // replicates for _, f, n in film.record.samples)
+                for r in range(replicates)]
+        bad = np.any(counts > np.array(room, dtype=np.float64), axis=1)
+        if bad.any():
+            raise InputError(f"replicate counts exceed what the sample ranges of tracer:samples hold in each "
+                             f"replicate at {_pixel(bad, film.width)}", path)
     bad = ~np.all(np.isfinite(rep_mean), axis=(1, 2))
     if bad.any():
         raise InputError(f"a replicate mean is not a finite number at {_pixel(bad, film.width)}", path)
+    weights = counts / np.maximum(film.count, 1)[:, None]
+    pooled = np.einsum("pr,prc->pc", weights, rep_mean)
+    scale = np.maximum(np.abs(film.mean), np.abs(rep_mean).max(axis=1))
+    tolerance = (2.0**-9 if half else 2.0**-20) * scale + 1e-30  # half and float32 rounding, with room
+    bad = np.any(np.abs(pooled - film.mean) > tolerance, axis=1) & (film.count > 0)
+    if bad.any():
+        raise InputError(f"the replicate means do not pool to the pixel mean (R, G, B) at "
+                         f"{_pixel(bad, film.width)}", path)
     film.replicates = replicates
     film.rep_count = counts.astype(np.int64)
     film.rep_mean = rep_mean
+    variance = film.variance()
+    bad = ~np.all(np.isfinite(variance) & (variance <= FLOAT32_MAX), axis=1)
+    if bad.any():
+        raise InputError(f"the replicate means give a variance beyond what a 32-bit float holds at "
+                         f"{_pixel(bad, film.width)}", path)
 
 
 def _error_text(source) -> str:
@@ -207,6 +234,13 @@ def _pixel(bad: np.ndarray, width: int) -> str:
     return f"pixel ({first % width}, {first // width})" + (f" and {more} more" if more else "")
 
 
+def _means_are_half(spec) -> bool:
+    import OpenImageIO as oiio
+
+    formats = list(spec.channelformats) or [spec.format] * spec.nchannels
+    return formats[list(spec.channelnames).index("R")] == oiio.HALF
+
+
 def exr_is_half(path: str | os.PathLike[str]) -> bool:
     """Whether an EXR stores its means (R, G, B) as 16-bit floats (merges of half references stay half)."""
     import OpenImageIO as oiio
@@ -215,9 +249,7 @@ def exr_is_half(path: str | os.PathLike[str]) -> bool:
     if inp is None:
         raise InputError(f"cannot read image: {_error_text(oiio)}", str(path))
     try:
-        spec = inp.spec()
-        formats = list(spec.channelformats) or [spec.format] * spec.nchannels
-        return formats[list(spec.channelnames).index("R")] == oiio.HALF
+        return _means_are_half(inp.spec())
     finally:
         inp.close()
 

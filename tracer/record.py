@@ -6,9 +6,10 @@ that a merge can tell whether two files hold the same estimator, the same scene 
 samples. The attribute names are spelled here and nowhere else (``docs/DESIGN.md``, "The render
 file").
 
-Samples: random numbers are a function of (seed, pixel, sample index, dimension), so a render
-with ``seed`` that drew sample indices ``first .. next - 1`` of every pixel holds exactly the
-samples ``(seed, first, next)``. A film's record keeps the *set* of such ranges it was made from,
+Samples: random numbers are a function of (seed, pixel, sample index, dimension) (for the
+``stratified`` sampler also of how the range was split into runs, which size its grids), so a
+render with ``seed`` that drew sample indices ``first .. next - 1`` of every pixel holds exactly
+the samples ``(seed, first, next)``. A film's record keeps the *set* of such ranges it was made from,
 carried through every merge and resume (``tracer:samples``), so two files hold a sample in
 common exactly when two of their ranges share a seed and overlap. A render interrupted in the
 middle of a pass holds, in each pixel, a prefix of its range: the range still names every index

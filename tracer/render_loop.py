@@ -27,6 +27,7 @@ from .estimators import DirectLighting
 from .film import Film
 from .jit import jit
 from .record import RenderRecord, check_mergeable, merged
+from .sampler_choice import MAX_REPLICATE_COUNT
 from .scene import Scene
 from .strategy import Strategy
 
@@ -178,6 +179,12 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     if film.replicates != replicates:
         raise InputError(f"cannot add {settings.sampler} samples to a film of {film.replicates} replicates "
                          f"(the {settings.sampler} sampler keeps {replicates})")
+    held = int(film.rep_count.max()) if replicates and film.rep_count.size else 0
+    if replicates and held + -(-settings.spp // replicates) > MAX_REPLICATE_COUNT:
+        # Checked now rather than when the file is written, after all the work.
+        raise InputError(f"{settings.spp} spp more would put over {MAX_REPLICATE_COUNT} samples in a "
+                         f"replicate of the {settings.sampler} sampler, more than its render file counts "
+                         "exactly")
     count_before = film.count.copy()  # to tell, if interrupted, how many sample indices were drawn
     sampler = samplers.make(settings.sampler, settings.seed, settings.first_sample, settings.spp)
     bar = None

@@ -13,6 +13,8 @@ DEFAULT_SAMPLER = "independent"
 # Independently randomized replicates per pixel of the samplers that have them
 # (``tracer.samplers``, "Replicates"): sample s belongs to replicate s % REPLICATES.
 REPLICATES = 8
+# A replicate's count is written as a float32 channel, exact up to 2^24 (134 M spp a pixel).
+MAX_REPLICATE_COUNT = 2**24
 # Sobol points are generated with 32-bit indices: a replicate holds at most 2^32 of them.
 SOBOL_MAX_INDEX = 2**32
 MAX_SAMPLE_INDEX = 2**53  # sample counts and indices stay exact in float64

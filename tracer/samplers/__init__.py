@@ -10,8 +10,9 @@ for bit at any batch size and thread count.
 
 A sampler reaches compiled code as a :class:`SamplerParams` (its code, what it was seeded
 with, and for ``stratified`` the render's grid). Adding a sampler: a module here with
-``NAME``, ``uniform`` and ``uniform_pair``, a code in ``SAMPLERS``, and a branch in :func:`start` and
-:func:`uniform`.
+``NAME``, ``uniform`` and ``uniform_pair``, its name in ``tracer.sampler_choice.SAMPLERS`` (and
+its replicates in ``replicates_of``; its code is its index there), and a branch in
+:func:`start`, :func:`uniform` and :func:`uniform_pair`.
 
 =============  ====  ==========  ===============================================================
 name           code  replicates  what

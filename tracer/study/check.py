@@ -84,7 +84,7 @@ from ..errors import InputError
 from ..film import Film, merge_renders
 from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
 from ..render_loop import RenderSettings, render_complete
-from ..sampler_choice import DEFAULT_SAMPLER, SAMPLERS
+from ..sampler_choice import DEFAULT_SAMPLER, SAMPLERS, replicates_of
 from ..scene import Scene, default_scene_path, load_scene
 from ..strategy import DEFAULT_LIGHT_SAMPLING, HEURISTICS, LIGHT_SAMPLINGS, STRATEGIES, Strategy
 from . import metrics, statistics
@@ -459,9 +459,10 @@ def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) ->
 def replicates_per_seed(spp: int, sampler: str = DEFAULT_SAMPLER) -> int:
     """Independent renders per seed for the image-mean test: ``REPLICATES_PER_SEED`` parts of
     the seed's samples when spp divides evenly (equal parts, equally distributed), else 1.
-    Also 1 for ``sobol``: the parts of one seed would continue the same scrambled sequences and
-    not be independent (``stratified`` keys each part's sets by its first index, so they are)."""
-    if sampler == "sobol":
+    Also 1 for the samplers with replicates: the parts of one Sobol seed would continue the same
+    scrambled sequences and not be independent, and a stratified part would stratify half as
+    many points per replicate as the render it stands for (at 16 spp, none)."""
+    if replicates_of(sampler):
         return 1
     return REPLICATES_PER_SEED if spp % REPLICATES_PER_SEED == 0 else 1
 
