@@ -665,3 +665,20 @@ def test_compare_takes_a_list_of_samplers(tmp_path):
     assert "sampler" in header
     assert (out / "efficiency_mis_sobol_vs_mis.png").is_file()
     assert [r["strategy"] for r in doc["convergence"]] == ["mis", "mis_sobol"]
+
+
+def test_slope_marks_tell_heavy_tails_from_faster_than_monte_carlo():
+    """A sweep slope whose interval lies above -1 is marked as a heavy-tailed estimator (†);
+    one whose interval lies below -1 falls faster than 1/spp, which stratified and QMC points
+    can do (‡), and is not called heavy-tailed; one that holds -1 is not marked."""
+    from tracer.study import report
+
+    def row(slope, low, high):
+        return {"slope_spp": slope, "slope_spp_low": low, "slope_spp_high": high,
+                "holds_minus_one": bool(low <= -1.0 <= high)}
+
+    heavy, fast, plain = row(-0.8, -0.9, -0.7), row(-1.3, -1.4, -1.2), row(-1.0, -1.1, -0.9)
+    assert report.slope_text(heavy).endswith("†") and report.slope_text(fast).endswith("‡")
+    assert report.slope_text(plain).endswith("]")
+    assert report._slope_notes([fast]) == [report.FAST_NOTE]
+    assert report._slope_notes([heavy, plain]) == [report.HEAVY_TAIL_NOTE]

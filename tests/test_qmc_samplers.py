@@ -588,6 +588,20 @@ def test_read_refuses_replicate_layers_that_contradict_the_file(small_scene, tmp
     assert str(bad) in str(caught.value)
 
 
+def test_half_float_references_of_both_samplers_read_back(small_scene, tmp_path):
+    """References store their means as half floats (tracer reference's default) while the
+    replicate means stay float32: the check that the replicate means pool to the pixel mean
+    allows half's rounding, also for dark pixels where half floats are subnormal."""
+    for sampler in QMC:
+        film = render_film(small_scene, sampler, 64, 7)
+        film.mean[:5] *= 1e-6  # dark pixels: half's subnormal range
+        film.rep_mean[:5] *= 1e-6
+        path = tmp_path / f"{sampler}.exr"
+        write_exr(path, film, half=True)
+        back = read_exr(path)
+        assert back.replicates == R and np.array_equal(back.rep_count, film.rep_count)
+
+
 def test_read_refuses_sobol_indices_beyond_the_sequence(small_scene, tmp_path):
     """A Sobol file whose tracer:samples lists indices past 8 x 2^32 (which the sampler cannot
     draw) is refused on read, naming the file; a render asking for them is refused before it

@@ -190,7 +190,9 @@ def _read_replicates(film: Film, names: list[str], data: np.ndarray, path: str, 
     weights = counts / np.maximum(film.count, 1)[:, None]
     pooled = np.einsum("pr,prc->pc", weights, rep_mean)
     scale = np.maximum(np.abs(film.mean), np.abs(rep_mean).max(axis=1))
-    tolerance = (2.0**-9 if half else 2.0**-20) * scale + 1e-30  # half and float32 rounding, with room
+    # Half or float32 rounding of the means, with room; below 2^-14 half floats are subnormal,
+    # spaced 2^-24 apart whatever the value.
+    tolerance = (2.0**-9 * scale + 2.0**-23) if half else (2.0**-20 * scale + 1e-37)
     bad = np.any(np.abs(pooled - film.mean) > tolerance, axis=1) & (film.count > 0)
     if bad.any():
         raise InputError(f"the replicate means do not pool to the pixel mean (R, G, B) at "

@@ -35,6 +35,8 @@ from .compare import (
 RELERR_RANGE = (-5.0, 1.0)  # log10 of per-pixel relative squared error shown in the maps
 RATIO_RANGE = 4.0  # log2 efficiency ratio shown from -4 to 4 (16x either way)
 COLORS = {"uniform": "#8c8c8c", "cosine": "#b07aa1", "bsdf": "#4e79a7", "light": "#f28e2b", "mis": "#59a14f"}
+# Curves of other methods (a light sampling, a sampler: mis_sobol ...) take these in turn.
+MORE_COLORS = ("#e15759", "#76b7b2", "#edc948", "#ff9da7", "#9c755f", "#bab0ac", "#17becf", "#bcbd22")
 # Every matplotlib figure is a PNG (the page shows it) and, as asked, a PDF and an SVG too.
 FIGURE_FORMATS = ("png", "pdf", "svg")
 PRINT_DPI = 300  # PNG figures at print resolution (a 5.5 inch chart is 1650 pixels wide)
@@ -44,6 +46,24 @@ HEAVY_TAIL_NOTE = (
     "rare, very large samples (a small light found by chance). Its expected relMSE still falls exactly as "
     "1/spp, but runs of few samples seldom draw those samples, so their measured error sits below the "
     "expectation and the curve falls slower until spp is large enough that every run draws its share.")
+# Why stratified and Sobol points can beat 1/spp: said where a slope's interval lies below -1.
+FAST_NOTE = (
+    "An interval below -1 (‡) falls faster than 1/spp: stratified or quasi-Monte Carlo points, whose "
+    "samples avoid each other (README: Samplers); independent samples cannot, on average.")
+
+
+def _slope_side(row: dict[str, Any]) -> str:
+    """Where a slope's interval lies against -1: ``shallower``, ``steeper`` or ``""`` (it holds
+    -1, or has no interval)."""
+    if row["holds_minus_one"] is not False:
+        return ""
+    return "steeper" if row["slope_spp_high"] < -1.0 else "shallower"
+
+
+def _slope_notes(slopes: list[dict[str, Any]]) -> list[str]:
+    """The notes that the marks on these slopes call for."""
+    sides = {_slope_side(r) for r in slopes}
+    return [note for side, note in (("shallower", HEAVY_TAIL_NOTE), ("steeper", FAST_NOTE)) if side in sides]
 
 
 def _pyplot():
@@ -236,10 +256,11 @@ def _interval(value: Any, low: Any, high: Any, spec: str) -> str:
 
 def slope_text(row: dict[str, Any], ascii_only: bool = False) -> str:
     """A strategy's slope against spp with its interval, marked † (``*`` in ASCII) where that
-    excludes -1."""
-    mark = " *" if ascii_only else " †"
+    lies above -1 (a heavy-tailed estimator) and ‡ (``**``) where it lies below (faster than
+    1/spp: stratified or QMC points)."""
+    marks = {"shallower": " *" if ascii_only else " †", "steeper": " **" if ascii_only else " ‡", "": ""}
     return (_interval(row["slope_spp"], row["slope_spp_low"], row["slope_spp_high"], ".2f")
-            + (mark if row["holds_minus_one"] is False else ""))
+            + marks[_slope_side(row)])
 
 
 def time_text(row: dict[str, Any], unit: str = "s", ascii_only: bool = False) -> str:
@@ -270,8 +291,9 @@ def convergence_chart(sweep: list[dict[str, Any]], target: float, path: Path,
     time_of = {r["strategy"]: r for r in times}
     seeds = 1
     plotted = False
+    extra = iter(MORE_COLORS * 4)
     for name, curve in sweep_curves(sweep).items():
-        color = COLORS.get(name)
+        color = COLORS.get(name) or next(extra, None)
         seeds = max(seeds, len(curve.seeds))
         t = time_of[name]
         ax_s.plot([], [], "o-", ms=3, color=color, label=f"{name}: {slope_text(slope_of[name])}")
@@ -320,8 +342,7 @@ def convergence_chart(sweep: list[dict[str, Any]], target: float, path: Path,
     caption = (f"Each point: the mean over {seeds} independent seeds; bars ±1 standard error, band: the "
                "range of single seeds. Intervals: jackknife over the seeds." if seeds > 1 else
                "One seed per point: no spread or intervals (use more sweep seeds).")
-    if any(r["holds_minus_one"] is False for r in slopes):
-        caption += " " + HEAVY_TAIL_NOTE
+    caption = " ".join([caption, *_slope_notes(slopes)])
     lines = textwrap.wrap(caption, 175)
     fig.text(0.01, 0.01, "\n".join(lines), fontsize=7.5, va="bottom", ha="left")
     # Room for the caption: its lines of 7.5 points (1.2 line spacing) as a share of the height.
@@ -403,9 +424,11 @@ def _convergence_html(document: dict[str, Any]) -> str:
         rows.append(f"<tr><td>{esc(slope['strategy'])}</td><td>{slope['seeds']}</td>"
                     f"<td>{esc(slope_text(slope))}</td><td>{esc(against_time)}</td>"
                     f"<td{why}>{esc(time_text(time, unit))}{note}</td></tr>")
-    flagged = any(r["holds_minus_one"] is False for r in slopes)
-    caveat = (f" {esc(HEAVY_TAIL_NOTE)} The intervals come from the spread between the seeds, so they "
-              "cannot account for large samples that no seed drew." if flagged else "")
+    notes = _slope_notes(slopes)
+    caveat = "".join(f" {esc(note)}" for note in notes)
+    if HEAVY_TAIL_NOTE in notes:
+        caveat += (" The intervals come from the spread between the seeds, so they cannot account for "
+                   "large samples that no seed drew.")
     return f"""<h2>Convergence: slopes and time to relMSE {target:g}</h2>
 <p>Each strategy rendered progressively (1, 2, 4, &hellip; spp) once per seed, with
 {slopes[0]['seeds']} independent seeds (none of which the reference holds); the chart shows the
@@ -504,9 +527,12 @@ def terminal_tables(document: dict[str, Any]) -> list[str]:
              f"{'strategy':<{width}}  {f'slope/spp [{level}]':<{sw}}  time to relMSE {target:g} [{level}]"]
     lines += [f"{r['strategy']:<{width}}  {c:<{sw}}  {t}"
               for r, c, t in zip(slopes, slope_col, time_col, strict=True)]
-    if any(r["holds_minus_one"] is False for r in slopes):
-        lines.append("* the interval excludes -1: a heavy-tailed estimator, whose rare large samples runs of "
-                     "few spp seldom draw (see index.html)")
+    sides = {_slope_side(r) for r in slopes}
+    if "shallower" in sides:
+        lines.append("* the interval lies above -1: a heavy-tailed estimator, whose rare large samples runs "
+                     "of few spp seldom draw (see index.html)")
+    if "steeper" in sides:
+        lines.append("** the interval lies below -1: faster than 1/spp, as stratified and QMC points can be")
     return lines
 
 
