@@ -81,14 +81,16 @@ def nested_scramble(x: np.uint64, seed: np.uint64) -> np.uint64:
 
 def _second_axis_tables() -> np.ndarray:
     """(4, 256) uint64: the XOR of the direction numbers of Sobol's second dimension selected by
-    each value of each byte of an index. The direction numbers are v_1 = 1/2 and v_k = v_{k-1}
-    xor v_{k-1} / 2 (the primitive polynomial x + 1: the generator matrix is Pascal's triangle
-    mod 2); the point is linear in the index's bits over GF(2), so it is the XOR of four table
-    entries, one per byte (the shuffled indices use all 32 bits, where a loop over bits takes
-    32 steps)."""
+    each value of each byte of an index, each bit-reversed (the order the scramble works in:
+    one reversal fewer per point; reversal is linear over XOR). The direction numbers are
+    v_1 = 1/2 and v_k = v_{k-1} xor v_{k-1} / 2 (the primitive polynomial x + 1: the generator
+    matrix is Pascal's triangle mod 2); the point is linear in the index's bits over GF(2), so
+    it is the XOR of four table entries, one per byte (the shuffled indices use all 32 bits,
+    where a loop over bits takes 32 steps)."""
     directions = [0x80000000]
     for _ in range(31):
         directions.append(directions[-1] ^ (directions[-1] >> 1))
+    directions = [int(f"{v:032b}"[::-1], 2) for v in directions]
     tables = np.zeros((4, 256), dtype=np.uint64)
     for byte in range(4):
         for value in range(256):
@@ -100,26 +102,13 @@ def _second_axis_tables() -> np.ndarray:
     return tables
 
 
-_SECOND_AXIS = _second_axis_tables()
-# The same in bit-reversed order (reversal is linear over XOR), which is the order the scramble
-# works in: one reversal fewer per point.
-_SECOND_AXIS_REVERSED = np.array([[int(f"{v:032b}"[::-1], 2) for v in row] for row in _SECOND_AXIS],
-                                 dtype=np.uint64)
+_SECOND_AXIS_REVERSED = _second_axis_tables()
 
 
 @jit
 def _xor_of_bytes(table: np.ndarray, index: np.uint64) -> np.uint64:
     return (table[0, index & _BYTE] ^ table[1, (index >> _S8) & _BYTE]
             ^ table[2, (index >> _S16) & _BYTE] ^ table[3, (index >> _S24) & _BYTE])
-
-
-@jit
-def sobol_bits(index: np.uint64, axis: int) -> np.uint64:
-    """32-bit fraction of point ``index`` (< 2^32) of Sobol's sequence in dimension ``axis`` (0
-    or 1): axis 0 is van der Corput's radical inverse, axis 1 ``_second_axis_tables``."""
-    if axis == 0:
-        return reverse_bits32(index)
-    return _xor_of_bytes(_SECOND_AXIS, index)
 
 
 @jit
