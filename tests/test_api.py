@@ -123,7 +123,7 @@ def test_a_signal_during_the_trimesh_import_is_not_swallowed(monkeypatch):
     import os
     import signal
 
-    from tracer.scene import toml_reader
+    from tracer.scene import mesh
 
     real_import = builtins.__import__
 
@@ -138,7 +138,7 @@ def test_a_signal_during_the_trimesh_import_is_not_swallowed(monkeypatch):
 
     monkeypatch.setattr(builtins, "__import__", swallowing_import)
     with pytest.raises(KeyboardInterrupt):
-        toml_reader.import_trimesh()
+        mesh.import_trimesh()
 
 
 def test_render_refuses_a_light_sampling_that_is_not_a_name():

@@ -273,14 +273,23 @@ def test_bsdf_sample_pdf_weight_agree_with_pdf_and_eval(kind):
 
 def _random_parameters(kind, n: int, gen: np.random.Generator) -> dict[str, np.ndarray]:
     """Per-lane parameters of material type ``kind`` drawn inside each parameter's declared
-    range (the lower 15% of a wide range such as GGX alpha's (0, 10], where materials live)."""
+    range (the lower 15% of a wide range such as GGX alpha's (0, 10], where materials live; an
+    unbounded one from lo to lo + 4), every choice and both booleans. A type with derived columns
+    (tables built per material) gets 6 distinct parameter sets spread over the lanes."""
+    sets = 6 if kind.derived else n
     values = {}
     for p in kind.params:
+        if p.choices or p.boolean:
+            values[p.name] = gen.integers(0, len(p.choices) or 2, sets).astype(np.float64)
+            continue
         lo = 0.0 if p.lo is None else p.lo
-        hi = lo + 1.0 if p.hi is None else p.hi
-        top = hi if hi - lo <= 1.0 else lo + 0.15 * (hi - lo)
-        values[p.name] = gen.uniform(lo + 0.01 * (top - lo), top, (n, p.size)).squeeze(axis=1) \
-            if p.size == 1 else gen.uniform(lo, top, (n, p.size))
+        hi = lo + 4.0 if p.hi is None else p.hi
+        top = hi if hi - lo <= 4.0 else lo + 0.15 * (hi - lo)
+        values[p.name] = gen.uniform(lo + 0.01 * (top - lo), top, (sets, p.size)).squeeze(axis=1) \
+            if p.size == 1 else gen.uniform(lo, top, (sets, p.size))
+    if sets < n:
+        which = gen.integers(0, sets, n)
+        values = {name: v[which] for name, v in values.items()}
     return values
 
 

@@ -13,7 +13,9 @@ from .samplers import dimensions
 
 @dataclass
 class Camera:
-    """Pinhole camera. Vectors are (3,) float64; ``fov`` is the vertical field of view in degrees."""
+    """Pinhole camera. Vectors are (3,) float64; ``fov`` is the vertical field of view in degrees.
+    ``mirrored``: the image's x axis runs along -r instead of r (a camera whose transform has a
+    negative determinant, as Mitsuba scenes with ``<scale x="-1"/>`` have)."""
 
     origin: np.ndarray
     target: np.ndarray
@@ -21,16 +23,18 @@ class Camera:
     fov: float
     width: int
     height: int
+    mirrored: bool = False
     _origins: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(f, r, u): forward, right and up unit vectors, ``r = f x up``, ``u = r x f``."""
+        """(f, r, u): forward, right and up unit vectors, ``r = f x up`` (negated if
+        ``mirrored``: the direction of the image's x axis), ``u = (f x up) x f``."""
         f = self.target - self.origin
         f = f / np.linalg.norm(f)
         r = np.cross(f, self.up)
         r = r / np.linalg.norm(r)
-        return f, r, np.cross(r, f)
+        return f, (-r if self.mirrored else r), np.cross(r, f)
 
     @property
     def _screen(self) -> tuple:

@@ -40,7 +40,7 @@ import numpy as np
 from . import lights, materials, mis, samplers, warp
 from .embree import RayCaster
 from .frame import add_scaled, basis, dot, normalized, scale, sub, to_local, to_world
-from .geometry import SceneRays, surface_point
+from .geometry import SceneRays, offset_origin, shading_normal, surface_point
 from .jit import jit
 from .lights import LightSampler
 from .samplers import dimensions
@@ -57,15 +57,19 @@ class Surfaces(NamedTuple):
 
     hit_table : (F + S, 16) per primitive (``Scene.hit_table``): geometry, emission, material row.
     material_kind : (K,) int8 material codes.   material_params : (K, W) their parameters.
+    twosided : (K,) bool, the material reflects on both sides (else black from behind).
     eps : ray offset along the normal (``Scene.ray_epsilon``).
     first_sphere : F, the primitive id of the first analytic sphere.
+    corner_normals : (F, 9) vertex normals of smooth triangles, or (0, 9) (``Scene.corner_normals``).
     """
 
     hit_table: np.ndarray
     material_kind: np.ndarray
     material_params: np.ndarray
+    twosided: np.ndarray
     eps: float
     first_sphere: int
+    corner_normals: np.ndarray
 
 
 class Plan(NamedTuple):
@@ -95,8 +99,9 @@ class DirectLighting:
         self.lights = LightSampler(scene, strategy.light_selection, strategy.light_sampling)
         m = scene.materials
         self.surfaces = Surfaces(np.ascontiguousarray(scene.hit_table), np.ascontiguousarray(m.kind),
-                                 np.ascontiguousarray(m.params, dtype=np.float64), float(scene.ray_epsilon),
-                                 int(scene.triangle_count))
+                                 np.ascontiguousarray(m.params, dtype=np.float64),
+                                 np.ascontiguousarray(m.twosided, dtype=np.bool_), float(scene.ray_epsilon),
+                                 int(scene.triangle_count), np.ascontiguousarray(scene.corner_normals))
         n_light, n_dir = strategy.light_count, strategy.direction_count
         self.plan = Plan(n_light, n_dir, DIRECTION_CODE[strategy.direction_technique],
                          mis.code(strategy.heuristic), strategy.one_sample_mis, n_light / (n_light + n_dir))
@@ -185,7 +190,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
     direction rays of every shading point into the buffers. Returns their counts."""
     hit_table, kinds, params, eps = (surfaces.hit_table, surfaces.material_kind, surfaces.material_params,
                                      surfaces.eps)
-    first_sphere = surfaces.first_sphere
+    first_sphere, twosided, corner_normals = surfaces.first_sphere, surfaces.twosided, surfaces.corner_normals
     alias_prob, alias, pmf = light_tables.alias_prob, light_tables.alias, light_tables.pmf
     technique, rows, spheres = light_tables.technique, light_tables.rows, light_tables.spheres
     shadow_origin, shadow_dir, shadow_tmax = shadow.origin, shadow.dir, shadow.tmax
@@ -215,11 +220,18 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         kind = kinds[material]
         if kind == materials.NONE or cos_view == 0.0:
             continue
-        # A frame around the face normal flipped toward the viewer.
-        normal = scale(1.0 if cos_view > 0.0 else -1.0, face_normal)
+        # The geometric normal toward the viewer: ray offsets and the light techniques use it.
+        geometric = scale(1.0 if cos_view > 0.0 else -1.0, face_normal)
+        # The shading frame: around the (interpolated) shading normal, flipped toward the viewer
+        # for a two-sided material; a one-sided material seen from behind reflects nothing.
+        normal = shading_normal(corner_normals, hit_table, first_sphere, p, x, face_normal)
+        cos_shading = -dot(d, normal)
+        if cos_shading < 0.0 and twosided[material]:
+            normal = scale(-1.0, normal)
+        elif not cos_shading > 0.0:
+            continue
         s, t = basis(normal)
         wo = to_local(s, t, normal, scale(-1.0, d))
-        origin = add_scaled(x, eps, normal)
         state = samplers.start(sampler, pixel[lane], sample[lane])
 
         # Which samples this point takes: (light samples, direction samples, their counts).
@@ -235,7 +247,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         for j in range(lights_here):
             u = samplers.uniform_pair(sampler, state, dimensions.light_point(j))
             wi_world, dist, le, pdf_light, delta = lights.sample(
-                alias_prob, alias, pmf, technique, rows, x, normal,
+                alias_prob, alias, pmf, technique, rows, x, geometric,
                 samplers.uniform(sampler, state, dimensions.light_choice(j)), u[0], u[1])
             if not pdf_light > 0.0:
                 continue
@@ -250,6 +262,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
                 _flag_nan(radiance, lane, value)
                 continue
             # The shadow ray runs from the offset origin to the sampled point, stopping short of it.
+            origin = offset_origin(x, eps, geometric, wi_world)
             to_target, length = normalized(sub(add_scaled(x, dist, wi_world), origin))
             shadow_tmax[n_shadow] = max(length - eps, 0.0)
             n_shadow = _put(shadow_origin, shadow_dir, shadow_value, shadow_lane, n_shadow,
@@ -267,13 +280,14 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
                 _flag_nan(radiance, lane, value)
                 continue
             wi_world = to_world(s, t, normal, wi)
+            origin = offset_origin(x, eps, geometric, wi_world)
             if not lights.may_reach(spheres, origin, wi_world):
                 continue  # it could only contribute 0: no ray
             dir_pdf[n_direction] = own_dir * pdf_dir
             dir_delta[n_direction] = delta
             for axis in range(3):
                 dir_point[n_direction, axis] = x[axis]
-                dir_normal[n_direction, axis] = normal[axis]
+                dir_normal[n_direction, axis] = geometric[axis]
             n_direction = _put(dir_origin, dir_dir, dir_value, dir_lane, n_direction,
                                origin, wi_world, value, lane)
     return n_shadow, n_direction

@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from .embree import RayCaster
-from .frame import add_scaled, dot, scale, sub
+from .frame import add_scaled, cross, dot, scale, sub
 from .jit import jit
 
 
@@ -84,6 +84,46 @@ def surface_point(hit_table, first_sphere: int, p: int, o, d):
     length = math.sqrt(dot(v, v))
     n = scale(1.0 / length, v) if length > 0.0 else (0.0, 0.0, 1.0)
     return add_scaled(center, radius, n), n, dot(n, d)
+
+
+@jit
+def shading_normal(corner_normals, hit_table, first_sphere: int, p: int, x, face_normal):
+    """The unit shading normal at point ``x`` of primitive ``p``: for a triangle with vertex
+    normals (a nonzero row of ``corner_normals``, (F, 9)), their interpolation by x's
+    barycentrics, normalized; otherwise (flat triangles, spheres, a degenerate interpolation)
+    ``face_normal``."""
+    if p >= first_sphere or len(corner_normals) == 0:
+        return face_normal
+    n0 = (corner_normals[p, 0], corner_normals[p, 1], corner_normals[p, 2])
+    n1 = (corner_normals[p, 3], corner_normals[p, 4], corner_normals[p, 5])
+    n2 = (corner_normals[p, 6], corner_normals[p, 7], corner_normals[p, 8])
+    if dot(n0, n0) == 0.0 or dot(n1, n1) == 0.0 or dot(n2, n2) == 0.0:
+        return face_normal
+    e1 = (hit_table[p, 3], hit_table[p, 4], hit_table[p, 5])
+    e2 = (hit_table[p, 6], hit_table[p, 7], hit_table[p, 8])
+    q = (x[0] - hit_table[p, 0], x[1] - hit_table[p, 1], x[2] - hit_table[p, 2])
+    c = cross(e1, e2)
+    area2 = dot(c, c)
+    if area2 == 0.0:
+        return face_normal
+    # x - v0 = b1 e1 + b2 e2: b1 = (q x e2) . c / |c|^2, b2 = (e1 x q) . c / |c|^2.
+    b1 = dot(cross(q, e2), c) / area2
+    b2 = dot(cross(e1, q), c) / area2
+    b0 = 1.0 - b1 - b2
+    n = (b0 * n0[0] + b1 * n1[0] + b2 * n2[0], b0 * n0[1] + b1 * n1[1] + b2 * n2[1],
+         b0 * n0[2] + b1 * n1[2] + b2 * n2[2])
+    length = math.sqrt(dot(n, n))
+    if not length > 0.0:
+        return face_normal
+    return scale(1.0 / length, n)
+
+
+@jit
+def offset_origin(x, eps: float, geometric_normal, direction):
+    """Where a ray in ``direction`` leaving surface point ``x`` starts: ``eps`` off the surface
+    along the geometric normal, on the side the ray goes to (with shading normals a sampled
+    direction may go below the geometric surface, through it)."""
+    return add_scaled(x, eps if dot(direction, geometric_normal) >= 0.0 else -eps, geometric_normal)
 
 
 @jit

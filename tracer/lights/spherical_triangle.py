@@ -68,15 +68,10 @@ import math
 
 import numpy as np
 
-from ..frame import dot, normalized, sub
+from ..frame import cross, dot, normalized, sub
 from ..jit import jit
 
 NO_DIRECTION = (0.0, 0.0, 1.0)
-
-
-@jit
-def _cross(a, b):
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 @jit
@@ -99,7 +94,7 @@ def _setup(x, a, b, c):
     eab, eac = sub(b, a), sub(c, a)
     dab = _unit_difference(pa, ua, la, lb, eab)
     dac = _unit_difference(pa, ua, la, lc, eac)
-    triple = abs(dot(pa, _cross(eab, eac))) / (la * lb * lc)
+    triple = abs(dot(pa, cross(eab, eac))) / (la * lb * lc)
     if not (triple > 0.0):  # x in the plane, a corner, a degenerate triangle, or nan
         return ua, ub, uc, dab, dac, 0.0, 0.0
     den = 1.0 + dot(ua, ub) + dot(ub, uc) + dot(uc, ua)
@@ -116,7 +111,7 @@ def solid_angle(x, a, b, c) -> float:
     ua, la = normalized(pa)
     ub, lb = normalized(pb)
     uc, lc = normalized(pc)
-    triple = abs(dot(pa, _cross(sub(b, a), sub(c, a)))) / (la * lb * lc)
+    triple = abs(dot(pa, cross(sub(b, a), sub(c, a)))) / (la * lb * lc)
     if not (triple > 0.0):
         return 0.0
     den = 1.0 + dot(ua, ub) + dot(ub, uc) + dot(uc, ua)
@@ -183,7 +178,7 @@ def invert(x, a, b, c, wi):
     t, m, p, q, half_ac = _arc_terms(ua, dab, dac, triple)
     w, _ = normalized(wi)
     dbw = sub(w, ub)  # wi - B
-    n1 = _cross(ub, dbw)  # normal of the great circle through B and wi
+    n1 = cross(ub, dbw)  # normal of the great circle through B and wi
     # n1 . A = n1 . (B - (B - A)) = -n1 . (B - A): no rounding of B.A enters.
     y = dot(n1, dab)  # = -n1 . A
     xx = dot(n1, t)

@@ -8,9 +8,17 @@ type              code  module
 ================  ====  ==============================================================
 (none)            0     black: shapes without a material reflect nothing
 diffuse           1     ``diffuse.py``: Lambertian
-roughconductor    2     ``roughconductor.py``: GGX microfacet reflector, Fresnel = 1
+roughconductor    2     ``roughconductor.py``: GGX or Beckmann metal, conductor Fresnel
 mirror            3     ``mirror.py``: ideal specular reflection (delta)
+conductor         4     ``conductor.py``: smooth metal, conductor Fresnel (delta)
+plastic           5     ``plastic.py``: diffuse base under a smooth coating (delta + diffuse)
+roughplastic      6     ``roughplastic.py``: diffuse base under a rough coating
 ================  ====  ==============================================================
+
+``microfacet.py`` holds what the rough types share (distributions, visible-normal sampling,
+Fresnel terms); ``presets.py`` the named metals of Mitsuba scenes. A material is two-sided
+(TOML) or one-sided, black from behind its shading normal (Mitsuba's rule):
+``MaterialTable.twosided``, applied by the estimator, not by the types.
 
 Adding a material: a module with ``CODE``, ``TYPE``, ``eval_pdf`` and ``sample``; its ``TYPE`` in
 ``TYPES`` below; a branch in :func:`eval_pdf` and :func:`sample`. The scene reader reads its
@@ -29,13 +37,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..jit import jit
-from . import diffuse, mirror, roughconductor
+from . import conductor, diffuse, mirror, plastic, roughconductor, roughplastic
 from .base import DELTA, DIFFUSE, GLOSSY, MaterialTable, MaterialType, Param
 
 NONE = 0  # the code of the black material
-TYPES: dict[str, MaterialType] = {t.name: t for t in (diffuse.TYPE, roughconductor.TYPE, mirror.TYPE)}
-_BY_CODE = {t.code: t for t in TYPES.values()}
-assert len(_BY_CODE) == len(TYPES) and NONE not in _BY_CODE, "material codes must be unique and > 0"
+TYPES: dict[str, MaterialType] = {t.name: t for t in (diffuse.TYPE, roughconductor.TYPE, mirror.TYPE,
+                                                      conductor.TYPE, plastic.TYPE, roughplastic.TYPE)}
+BY_CODE = {t.code: t for t in TYPES.values()}
+assert len(BY_CODE) == len(TYPES) and NONE not in BY_CODE, "material codes must be unique and > 0"
 
 
 @jit
@@ -48,6 +57,12 @@ def eval_pdf(kind: int, params, row: int, wo, wi):
         return roughconductor.eval_pdf(params, row, wo, wi)
     if kind == mirror.CODE:
         return mirror.eval_pdf(params, row, wo, wi)
+    if kind == conductor.CODE:
+        return conductor.eval_pdf(params, row, wo, wi)
+    if kind == plastic.CODE:
+        return plastic.eval_pdf(params, row, wo, wi)
+    if kind == roughplastic.CODE:
+        return roughplastic.eval_pdf(params, row, wo, wi)
     return (0.0, 0.0, 0.0), 0.0
 
 
@@ -60,12 +75,20 @@ def sample(kind: int, params, row: int, wo, u_lobe: float, u0: float, u1: float)
         return roughconductor.sample(params, row, wo, u_lobe, u0, u1)
     if kind == mirror.CODE:
         return mirror.sample(params, row, wo, u_lobe, u0, u1)
+    if kind == conductor.CODE:
+        return conductor.sample(params, row, wo, u_lobe, u0, u1)
+    if kind == plastic.CODE:
+        return plastic.sample(params, row, wo, u_lobe, u0, u1)
+    if kind == roughplastic.CODE:
+        return roughplastic.sample(params, row, wo, u_lobe, u0, u1)
     return (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0
 
 
-def table(materials: list[tuple[str, str, dict[str, object]]]) -> MaterialTable:
+def table(materials: list[tuple[str, str, dict[str, object]]], twosided: list[bool] | None = None
+          ) -> MaterialTable:
     """A material table from ``(name, type name, parameters by name)`` triples; row 0 is the
-    black material, so the i-th triple is row i + 1."""
+    black material, so the i-th triple is row i + 1. ``twosided``: per triple, whether the
+    material reflects on both sides (default: all do, as tracer's TOML materials)."""
     rows = [np.zeros(0)]
     kinds = [NONE]
     for _, type_name, values in materials:
@@ -76,12 +99,14 @@ def table(materials: list[tuple[str, str, dict[str, object]]]) -> MaterialTable:
     params = np.zeros((len(rows), max(width, 1)))
     for i, r in enumerate(rows):
         params[i, : len(r)] = r
-    return MaterialTable(np.asarray(kinds, dtype=np.int8), params, ["(none)"] + [m[0] for m in materials])
+    sides = [True] + (list(twosided) if twosided is not None else [True] * len(materials))
+    return MaterialTable(np.asarray(kinds, dtype=np.int8), params, ["(none)"] + [m[0] for m in materials],
+                         np.asarray(sides, dtype=np.bool_))
 
 
 def lobes(kind: int) -> int:
     """The lobe flags of material code ``kind`` (0 for the black material)."""
-    return _BY_CODE[kind].lobes if kind in _BY_CODE else 0
+    return BY_CODE[kind].lobes if kind in BY_CODE else 0
 
 
 @dataclass
@@ -121,7 +146,8 @@ class Materials:
     def per_lane(cls, type_names, values: dict[str, np.ndarray]) -> "Materials":
         """Lane i: a material of type ``type_names[i]`` (a sequence, or one name for all lanes)
         with parameters ``values[name][i]`` (``(n,)`` or ``(n, 3)`` arrays; a parameter that a
-        lane's type does not have is ignored)."""
+        lane's type does not have is ignored, one it has and ``values`` lacks takes its default;
+        derived columns are computed once per distinct parameter set)."""
         n = len(next(iter(values.values())))
         names = np.broadcast_to(np.asarray(type_names, dtype=object), (n,))
         params = np.zeros((n + 1, max([t.width for t in TYPES.values()])))
@@ -130,9 +156,21 @@ class Materials:
             t = TYPES[type_name]
             lanes = 1 + np.flatnonzero(names == type_name)
             kind[lanes] = t.code
+            if t.derived:  # tables computed from the parameters, once per distinct set
+                rows: dict[bytes, np.ndarray] = {}
+                for lane in lanes:
+                    given = {p.name: np.asarray(values[p.name], dtype=np.float64)[lane - 1]
+                             for p in t.params if p.name in values}
+                    key = b"".join(np.ascontiguousarray(v).tobytes() for v in given.values())
+                    if key not in rows:
+                        rows[key] = t.row(given)
+                    params[lane, :t.width] = rows[key]
+                continue
             for p in t.params:
                 column = t.column(p.name)
-                given = np.asarray(values[p.name], dtype=np.float64)[lanes - 1]
+                given = (np.asarray(values[p.name], dtype=np.float64)[lanes - 1] if p.name in values
+                         else np.broadcast_to(np.asarray(p.encode(p.default), dtype=np.float64),
+                                              (len(lanes), p.size)))
                 params[lanes, column:column + p.size] = given.reshape(len(lanes), p.size)
         return cls(MaterialTable(kind, params, ["(none)"] + [f"lane{i}" for i in range(n)]),
                    np.arange(1, n + 1, dtype=np.int64))

@@ -25,6 +25,7 @@ light (pbrt's convention).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -38,32 +39,56 @@ DELTA, GLOSSY, DIFFUSE = 1, 2, 4
 class Param:
     """One parameter of a material type: ``size`` columns (1: a number, 3: an RGB or vector),
     the range a scene may give (``lo_open``: lo itself excluded) and the default (None:
-    required)."""
+    required).
+
+    choices : a parameter a scene gives as one of these names, held as its index (a column of
+        0.0, 1.0, ...); the default is then a name.   boolean : given as true or false, held as
+        1.0 or 0.0.   late : added to the type after scene digests were first written; a scene
+        that leaves it at its default keeps the digest it had (``MaterialTable.digest_params``).
+    """
 
     name: str
     size: int
     lo: float | None = None
     hi: float | None = None
     lo_open: bool = False
-    default: tuple[float, ...] | float | None = None
+    default: tuple[float, ...] | float | str | bool | None = None
     doc: str = ""
+    choices: tuple[str, ...] = ()
+    boolean: bool = False
+    late: bool = False
+
+    def encode(self, value: object) -> object:
+        """``value`` as the column(s) hold it: a choice's index, a boolean's 0 or 1."""
+        if self.choices:
+            return float(self.choices.index(value)) if isinstance(value, str) else value
+        if self.boolean:
+            return float(bool(value))
+        return value
 
 
 @dataclass(frozen=True)
 class MaterialType:
     """A material type: ``name`` as scene files spell it, ``code`` as kernels dispatch on it,
-    ``params`` laid out in columns in this order, ``lobes`` the flags of every lobe it has."""
+    ``params`` laid out in columns in this order, ``lobes`` the flags of every lobe it has.
+
+    derived : columns computed from the parameters once per material (tables, constants that
+        kernels would otherwise recompute per sample), after the parameters in each row;
+        ``derive(values) -> {name: value}`` fills them from the parameters by name.
+    """
 
     name: str
     code: int
     params: tuple[Param, ...]
     lobes: int
     doc: str = ""
+    derived: tuple[Param, ...] = ()
+    derive: Callable[[dict[str, object]], dict[str, object]] | None = None
 
     def column(self, name: str) -> int:
-        """First column of parameter ``name`` in this type's rows."""
+        """First column of parameter (or derived column) ``name`` in this type's rows."""
         offset = 0
-        for p in self.params:
+        for p in self.params + self.derived:
             if p.name == name:
                 return offset
             offset += p.size
@@ -72,18 +97,42 @@ class MaterialType:
     @property
     def width(self) -> int:
         """Columns a row of this type uses."""
-        return sum(p.size for p in self.params)
+        return sum(p.size for p in self.params + self.derived)
 
     def row(self, values: dict[str, object]) -> np.ndarray:
-        """This type's parameters as a row, from ``values`` by name (defaults where absent)."""
+        """This type's parameters as a row, from ``values`` by name (defaults where absent;
+        choices by name or index, booleans as bool or number), then its derived columns."""
         out = np.zeros(self.width)
+        given: dict[str, object] = {}
         for p in self.params:
             value = values.get(p.name, p.default)
             if value is None:
                 raise ValueError(f"material {self.name!r} needs {p.name!r}")
-            out[self.column(p.name): self.column(p.name) + p.size] = np.broadcast_to(
-                np.asarray(value, dtype=np.float64), (p.size,))
+            column = self.column(p.name)
+            out[column: column + p.size] = np.broadcast_to(np.asarray(p.encode(value), dtype=np.float64),
+                                                           (p.size,))
+            given[p.name] = out[column] if p.size == 1 else out[column: column + p.size].copy()
+        if self.derive is not None:
+            for name, value in self.derive(given).items():
+                column = self.column(name)
+                size = next(p.size for p in self.derived if p.name == name)
+                out[column: column + size] = np.broadcast_to(np.asarray(value, dtype=np.float64), (size,))
         return out
+
+    def digest_width(self, row: np.ndarray) -> int:
+        """How many leading columns of ``row`` a scene digest holds: all but the trailing
+        ``late`` parameters that hold their defaults (and the derived columns, which follow
+        from the parameters)."""
+        width = sum(p.size for p in self.params)
+        for p in reversed(self.params):
+            if not p.late:
+                break
+            column = self.column(p.name)
+            default = np.broadcast_to(np.asarray(p.encode(p.default), dtype=np.float64), (p.size,))
+            if not np.array_equal(row[column: column + p.size], default):
+                break
+            width -= p.size
+        return width
 
 
 @jit
@@ -99,8 +148,28 @@ class MaterialTable:
 
     kind : (K,) int8 material code.   params : (K, W) float64, each row laid out by its type.
     names : (K,) material names as the scene gives them.
+    twosided : (K,) bool: the material reflects on both sides of a surface (tracer's TOML
+        materials); False: on the side the shading normal points to only, black from behind
+        (Mitsuba's BSDFs unless wrapped in ``twosided``). Default: all True.
     """
 
     kind: np.ndarray
     params: np.ndarray
     names: list[str]
+    twosided: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.twosided is None:
+            self.twosided = np.ones(len(self.kind), dtype=np.bool_)
+        self.twosided = np.asarray(self.twosided, dtype=np.bool_)
+
+    def digest_params(self, types: dict[int, MaterialType]) -> np.ndarray:
+        """The parameter table as a scene digest holds it: each row up to its type's
+        ``digest_width`` (``types`` by code), zero-padded to the widest, so that scenes written
+        before a type gained ``late`` parameters keep their digests."""
+        widths = [types[int(k)].digest_width(row) if int(k) in types else 0
+                  for k, row in zip(self.kind, self.params, strict=True)]
+        out = np.zeros((len(self.kind), max(max(widths, default=0), 1)))
+        for i, w in enumerate(widths):
+            out[i, :w] = self.params[i, :w]
+        return out

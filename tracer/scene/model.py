@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import materials
 from ..camera import Camera
 from ..materials import MaterialTable
 
@@ -69,6 +70,9 @@ class Scene:
     spheres : (S, 4) float64 analytic spheres, centre and radius (rounded to float32, as the
         light table stores them).   sphere_material : (S,) int32.   sphere_emission : (S, 3)
         radiance leaving the outside.   shape_of_sphere : (S,) int32 index into ``shapes``.
+    corner_normals : (F, 9) float64 unit vertex normals at each triangle's three corners, for
+        smooth shading (a row of zeros: the triangle shades with its face normal); (0, 9) when
+        every triangle is flat.
 
     Derived on construction: ``v0, edge1, edge2, normal`` (F, 3), ``area`` (F,),
     ``hit_table`` (F + S, 16), ``ray_epsilon``.
@@ -90,6 +94,7 @@ class Scene:
     sphere_material: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int32))
     sphere_emission: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     shape_of_sphere: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int32))
+    corner_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 9)))
 
     def __post_init__(self) -> None:
         # Vertices at float32 precision, as Embree holds them: hit points, light samples and pdfs
@@ -105,6 +110,9 @@ class Scene:
         # Zero-area triangles get a zero normal (and zero area): never sampled, shaded black.
         self.normal = cross / np.where(length > 0.0, length, 1.0)[:, None]
         self.spheres = np.asarray(self.spheres, dtype=np.float32).astype(np.float64).reshape(-1, 4)
+        self.corner_normals = np.ascontiguousarray(self.corner_normals, dtype=np.float64).reshape(-1, 9)
+        if len(self.corner_normals) not in (0, len(self.faces)):
+            raise ValueError("corner_normals needs one row per triangle, or none")
         # What a hit needs, in one row per primitive so that a batch gathers it in one go:
         # triangles v0 (3), edge1 (3), edge2 (3), normal (3); spheres centre (3), radius (1),
         # zeros (5), and a zero normal, which marks the row as a sphere's; then for both
@@ -149,6 +157,8 @@ class Scene:
 
         cam = self.camera
         add("camera", np.concatenate([cam.origin, cam.target, cam.up, [cam.fov]]), "<f8")
+        if cam.mirrored:  # only then, so that the digests of other scenes stay as they were
+            digest.update(b"camera mirrored\0")
         add("vertices", self.vertices, "<f4")
         add("faces", self.faces, "<i8")
         add("material", self.material, "<i4")
@@ -156,7 +166,7 @@ class Scene:
         add("shape_of_triangle", self.shape_of_triangle, "<i4")
         digest.update(("shapes " + ",".join(s.type for s in self.shapes) + "\0").encode())
         add("material_kinds", self.materials.kind, "<i1")
-        add("material_params", self.materials.params, "<f8")
+        add("material_params", self.materials.digest_params(materials.BY_CODE), "<f8")
         add("point_position", self.point_position, "<f4")
         add("point_intensity", self.point_intensity, "<f4")
         if len(self.spheres):  # only then, so that the digests of scenes without them stay as they were
@@ -164,6 +174,10 @@ class Scene:
             add("sphere_material", self.sphere_material, "<i4")
             add("sphere_emission", self.sphere_emission, "<f4")
             add("shape_of_sphere", self.shape_of_sphere, "<i4")
+        if len(self.corner_normals):  # smooth shading; likewise only when there is some
+            add("corner_normals", self.corner_normals, "<f8")
+        if not np.all(self.materials.twosided):
+            add("material_twosided", self.materials.twosided, "<i1")
         return digest.hexdigest()
 
     @property

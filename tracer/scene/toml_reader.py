@@ -24,6 +24,7 @@ from ..record import MAX_SAMPLE_INDEX
 from ..sampler_choice import SAMPLERS
 from ..strategy import LIGHT_SAMPLINGS, STRATEGIES
 from .icosphere import unit_icosphere
+from .mesh import Mesh, MeshError, angle_weighted_normals, read_mesh_file
 from .model import Scene, Shape
 
 # Film memory per pixel: count (int64), mean and M2 (3 float64 each), plus per-pass batch
@@ -124,6 +125,7 @@ def scene_from_document(doc: Any, path: str, base: Path, width: int | None = Non
         sphere_material=np.array(geometry.sphere_material, dtype=np.int32),
         sphere_emission=np.array(geometry.sphere_emission, dtype=np.float64).reshape(-1, 3),
         shape_of_sphere=np.array(geometry.shape_of_sphere, dtype=np.int32),
+        corner_normals=geometry.normals(),
     )
 
 
@@ -236,6 +238,14 @@ class _Reader:
             self.fail(f"expected one of {', '.join(choices)}; got '{value}'", name)
         return value
 
+    def boolean(self, name: str, default: Any = ...) -> Any:
+        value = self.raw(name, default)
+        if value is default and default is not ...:
+            return value
+        if not isinstance(value, bool):
+            self.fail(f"expected true or false, got {_kind(value)}", name)
+        return value
+
     def done(self) -> None:
         unknown = sorted(set(self.table) - self.used)
         if unknown:
@@ -299,21 +309,27 @@ def _read_camera(r: _Reader, width: int | None, height: int | None) -> Camera:
 def _read_materials(path: str, table: Any) -> materials.MaterialTable:
     top = _Reader(path, "materials", table)
     triples = []
+    sides: list[bool] = []
     for name in table:
         m = _Reader(path, f"materials.{name}", top.raw(name))
         kind = materials.TYPES[m.string("type", tuple(materials.TYPES))]
         values: dict[str, object] = {}
         for p in kind.params:
             default = ... if p.default is None else p.default
-            if p.size == 1:
+            if p.choices:
+                values[p.name] = m.string(p.name, p.choices, default=default)
+            elif p.boolean:
+                values[p.name] = m.boolean(p.name, default=default)
+            elif p.size == 1:
                 values[p.name] = m.number(p.name, default=default, lo=p.lo, lo_open=p.lo_open, hi=p.hi)
             else:
                 values[p.name] = m.vector(p.name, p.size, default=default, lo=p.lo, lo_open=p.lo_open,
                                           hi=p.hi)
+        sides.append(m.boolean("twosided", default=True))
         m.done()
         triples.append((name, kind.name, values))
     top.done()
-    return materials.table(triples)
+    return materials.table(triples, sides)
 
 
 class _Geometry:
@@ -332,10 +348,17 @@ class _Geometry:
         self.sphere_material: list[int] = []
         self.sphere_emission: list[np.ndarray] = []
         self.shape_of_sphere: list[int] = []
+        self.corner_normals: list[np.ndarray] = []
+        self.smooth = False
 
     def add(self, shape_type: str, record: dict[str, Any], vertices: np.ndarray, faces: np.ndarray,
-            material: int, emission: np.ndarray) -> None:
+            material: int, emission: np.ndarray, normals: np.ndarray | None = None) -> None:
+        """Add a shape's triangles; ``normals`` (V, 3) unit vertex normals for smooth shading
+        (a zero normal shades its triangles flat), None for flat shading."""
         n = len(faces)
+        self.corner_normals.append(np.zeros((n, 9)) if normals is None
+                                   else np.asarray(normals, dtype=np.float64)[faces].reshape(n, 9))
+        self.smooth = self.smooth or normals is not None
         self._faces.append(faces.astype(np.int64) + self._count)
         self._vertices.append(vertices)
         self._count += len(vertices)
@@ -355,6 +378,11 @@ class _Geometry:
 
     def vertices(self) -> np.ndarray:
         return np.concatenate(self._vertices) if self._vertices else np.zeros((0, 3))
+
+    def normals(self) -> np.ndarray:
+        """(F, 9) vertex normals of each triangle's corners (zeros: flat), or (0, 9) when no
+        shape is smooth."""
+        return np.concatenate(self.corner_normals) if self.smooth else np.zeros((0, 9))
 
     def faces(self) -> np.ndarray:
         return (np.concatenate(self._faces) if self._faces else np.zeros((0, 3))).astype(np.int32)
@@ -401,23 +429,17 @@ def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Ge
         vertices, faces = _icosphere(subdivisions, radius, center)
     else:
         file = r.string("file")
+        shading = r.string("normals", ("face", "vertex"), default="face")
         record = {"file": str(base / file)}
-        vertices, faces = _read_mesh(r, base / file)
+        mesh = _read_mesh(r, base / file)
+        vertices, faces = mesh.vertices, mesh.faces
+        if shading == "vertex":  # the file's vertex normals, else Mitsuba's angle-weighted ones
+            normals = mesh.normals if mesh.normals is not None else angle_weighted_normals(vertices, faces)
+            r.done()
+            geometry.add(shape_type, record, vertices, faces, material, emission, normals)
+            return
     r.done()
     geometry.add(shape_type, record, vertices, faces, material, emission)
-
-
-def import_trimesh():
-    """The trimesh module. Its first import runs optional imports inside ``except
-    BaseException``, which would swallow a Ctrl-C or SIGTERM arriving then (the render went on
-    and exited 0): signals are held during the import and raised right after it."""
-    from .. import interrupts
-
-    with interrupts.deferred() as arrived:
-        import trimesh
-    if arrived:
-        raise KeyboardInterrupt
-    return trimesh
 
 
 def _icosphere(subdivisions: int, radius: float, center: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -427,33 +449,8 @@ def _icosphere(subdivisions: int, radius: float, center: np.ndarray) -> tuple[np
     return vertices * radius + center, faces
 
 
-def _read_mesh(r: _Reader, mesh_path: Path) -> tuple[np.ndarray, np.ndarray]:
-    trimesh = import_trimesh()
-
+def _read_mesh(r: _Reader, mesh_path: Path) -> Mesh:
     try:
-        found = mesh_path.is_file()
-    except OSError as exc:  # a name too long for the file system, and the like
-        r.fail(f"cannot look up mesh {str(mesh_path)[:80]}...: {exc.strerror}", "file")
-    if not found:
-        r.fail(f"mesh file not found: {mesh_path}", "file")
-    try:
-        # process=False keeps the file's faces and winding exactly as written.
-        mesh = trimesh.load_mesh(str(mesh_path), process=False)
-    except Exception as exc:  # trimesh raises many types for unreadable files
-        r.fail(f"cannot read mesh {mesh_path}: {exc}", "file")
-    if not isinstance(mesh, trimesh.Trimesh):
-        r.fail(f"{mesh_path} holds no triangle mesh", "file")
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.faces)
-    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
-        r.fail(f"{mesh_path} holds no triangles", "file")
-    if not np.all(np.isfinite(vertices)):
-        bad = int(np.flatnonzero(~np.all(np.isfinite(vertices), axis=1))[0])
-        r.fail(f"{mesh_path} has a non-finite vertex (vertex {bad}: {vertices[bad].tolist()})", "file")
-    if np.max(np.abs(vertices)) > MAX_COORDINATE:
-        bad = int(np.argmax(np.max(np.abs(vertices), axis=1)))
-        r.fail(f"{mesh_path} has a vertex beyond the coordinate range +-{MAX_COORDINATE:g} (vertex {bad})",
-               "file")
-    if faces.min() < 0 or faces.max() >= len(vertices):
-        r.fail(f"{mesh_path} has a face index outside its {len(vertices)} vertices", "file")
-    return vertices, faces
+        return read_mesh_file(mesh_path)
+    except MeshError as exc:
+        r.fail(str(exc), "file")

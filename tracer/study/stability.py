@@ -107,6 +107,14 @@ def cases(size: int = SIZE) -> list[Case]:
              testable=("bsdf", "mis"), veach="bsdf"),
         Case("zero_area_triangles", "emissive and receiving meshes with zero-area triangles",
              testable=("light", "mis", "bsdf", "cosine"), veach="light"),
+        Case("conductor_small_light", "smooth gold (conductor Fresnel) under a small light",
+             blind=("uniform", "cosine", "light"), testable=("bsdf", "mis")),
+        Case("beckmann_1e-3_small_light", "Beckmann alpha 1e-3 under a small light",
+             testable=("bsdf", "mis")),
+        Case("plastic_small_light", "smooth plastic: a delta coating over a diffuse base",
+             testable=("mis",)),
+        Case("roughplastic_small_light", "rough plastic (Beckmann 0.02) under a small light",
+             testable=("mis",)),
     ]
     for scale in ("0.001", "1000"):
         out.append(Case(f"scaled_{scale}", f"a small quad light, every length x {scale}"))
