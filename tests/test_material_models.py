@@ -91,9 +91,11 @@ def test_diffuse_fresnel_reflectance_identity(eta):
     """eta^2 (1 - Fdr(1/eta)) = 1 - Fdr(eta) (the hemispherical transmittances of the two sides
     balance; it makes the plastic's linear albedo exact): the quadrature must hold it to 1e-10,
     and Fdr(eta) must match scipy's adaptive quadrature of 2 int F mu dmu to 1e-10."""
-    inside, outside = microfacet.diffuse_fresnel_reflectance(1.0 / eta), microfacet.diffuse_fresnel_reflectance(eta)
+    inside = microfacet.diffuse_fresnel_reflectance(1.0 / eta)
+    outside = microfacet.diffuse_fresnel_reflectance(eta)
     assert abs(eta ** 2 * (1.0 - inside) - (1.0 - outside)) < 1e-10
-    reference = integrate.quad(lambda mu: 2.0 * mu * microfacet.fresnel_dielectric_array(np.array([mu]), eta)[0],
+    fresnel = microfacet.fresnel_dielectric_array
+    reference = integrate.quad(lambda mu: 2.0 * mu * fresnel(np.array([mu]), eta)[0],
                                0.0, 1.0, epsabs=1e-13, epsrel=1e-13)[0]
     assert abs(outside - reference) < 1e-10
 
@@ -211,7 +213,8 @@ def test_conductor_reflects_by_fresnel():
     assert np.all(s.delta) and np.all(s.pdf == 0.0)
     np.testing.assert_array_equal(s.wi, wo * [-1.0, -1.0, 1.0])
     for c, (r, eta, k) in enumerate(zip([0.9, 0.8, 0.7], [0.2, 0.9, 1.1], [3.9, 2.4, 2.2], strict=True)):
-        np.testing.assert_array_equal(s.weight[:, c], r * microfacet.fresnel_conductor_array(wo[:, 2], eta, k))
+        fresnel = microfacet.fresnel_conductor_array(wo[:, 2], eta, k)
+        np.testing.assert_array_equal(s.weight[:, c], r * fresnel)
 
 
 def _mean_weight(material: Materials, wo: np.ndarray, n: int, gen) -> tuple[np.ndarray, np.ndarray]:
@@ -263,7 +266,8 @@ def test_roughplastic_transmittance_table_and_energy(distribution):
     from tracer.materials import roughplastic
     for mu in (0.05, 0.3, 0.7, 1.0):
         wo = np.array([np.sqrt(1 - mu * mu), 0.0, mu])
-        h = microfacet.sample_visible_normals(gen.random((n, 2)), np.tile(wo, (n, 1)), np.full(n, alpha), code)
+        u = gen.random((n, 2))
+        h = microfacet.sample_visible_normals(u, np.tile(wo, (n, 1)), np.full(n, alpha), code)
         cos_oh = h @ wo
         wi_z = 2 * cos_oh * h[:, 2] - mu
         ok = (wi_z > 0) & (cos_oh > 0)
@@ -320,7 +324,8 @@ def test_furnace_new_materials_agree_across_strategies(write_scene, tmp_path, ma
     level = sidak(2 * 4 * 3)
     for i, name in enumerate(["uniform", "cosine", "light", "mis"]):
         radiance = DirectLighting(scene, Strategy(name)).radiance(origins, dirs, seed=40 + i)
-        z = (radiance.mean(axis=0) - ref_mean) / np.sqrt(radiance.var(axis=0, ddof=1) / len(radiance) + ref_var)
+        se = np.sqrt(radiance.var(axis=0, ddof=1) / len(radiance) + ref_var)
+        z = (radiance.mean(axis=0) - ref_mean) / se
         assert np.all(2 * sps.norm.sf(np.abs(z)) > level), (name, radiance.mean(axis=0), ref_mean)
 
 
@@ -393,8 +398,8 @@ def test_shading_normal_gives_the_closed_form_of_the_tilted_surface(write_scene,
     still make the techniques agree."""
     from test_estimators import polygon_irradiance, quad_corners, shoot_at
     tilt = unit([0.25, 1.0, 0.1])
-    scene = load_scene(write_scene(PLANE_AND_LIGHT.format(plane_type="mesh", plane=_tilted_plane(tmp_path, tilt),
-                                                          sides="")))
+    plane = _tilted_plane(tmp_path, tilt)
+    scene = load_scene(write_scene(PLANE_AND_LIGHT.format(plane_type="mesh", plane=plane, sides="")))
     points = np.array([[0.0, 0.0, 0.0], [0.6, 0.0, 0.4]])
     corners = quad_corners([-0.4, 1.0, -0.3], [0.8, 0.0, 0.0], [0.0, 0.0, 0.6])
     origins, dirs, which = shoot_at(points, 40_000)

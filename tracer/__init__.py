@@ -9,7 +9,7 @@ The Python API (``tracer/api.py``)::
     image.write("out.exr")                              # EXR with variance, PNG beside it
     tracer.compare(image, tracer.read_image("reference.exr"))
 
-load_scene(source, width=None, height=None, base_dir=None) -> Scene
+load_scene(source, width=None, height=None, base_dir=None, notify=None) -> Scene   (.toml or Mitsuba .xml)
 render(scene, strategy="mis", spp=64, seed=0, **options) -> Image
 read_image(path) -> Image
 compare(image, reference, seconds=None) -> dict of mse, relmse, variance, efficiency

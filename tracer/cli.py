@@ -11,7 +11,7 @@ import os
 import sys
 from pathlib import Path
 
-from . import __version__, interrupts
+from . import __version__, interrupts, notices
 from .errors import InputError
 from .sampler_choice import DEFAULT_SAMPLER, SAMPLERS
 
@@ -231,6 +231,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="PNG preview exposure in stops (default 0)")
     m.add_argument("--quiet", action="store_true", help="no summary line")
     m.set_defaults(run=cmd_merge)
+
+    cv = sub.add_parser("convert", help="write a scene (Mitsuba 3 XML or TOML) as a tracer TOML scene",
+                        description="Read a scene (a Mitsuba 3 XML file, docs/MITSUBA_XML.md, or a TOML one) "
+                        "and write the TOML scene that renders the same (the same scene digest, checked by "
+                        "reading it back), with every mesh, Mitsuba cube and disk as a PLY file beside it "
+                        "(STEM_shapeN.ply).")
+    cv.add_argument("scene", help="scene file (.xml: Mitsuba 3; anything else: TOML)")
+    cv.add_argument("-o", "--output", help="TOML file to write (default: SCENE.toml here)")
+    cv.add_argument("--quiet", action="store_true", help="no summary line")
+    cv.set_defaults(run=cmd_convert)
     return parser
 
 
@@ -309,6 +319,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     _terminate_like_ctrl_c()
+    previous = notices.set_handler(_print_note())
     try:
         return args.run(args)
     except InputError as exc:
@@ -321,6 +332,21 @@ def main(argv: list[str] | None = None) -> int:
         # `tracer ... | head`: the reader left; say nothing more (and nothing at exit either).
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    finally:
+        notices.set_handler(previous)
+
+
+def _print_note():
+    """A notes handler (``tracer.notices``) that prints each distinct note once on stderr (a
+    command that loads a scene several times says it once)."""
+    seen: set[str] = set()
+
+    def handler(line: str) -> None:
+        if line not in seen:
+            seen.add(line)
+            print(f"tracer: note: {line}", file=sys.stderr)
+
+    return handler
 
 
 def _terminate_like_ctrl_c() -> None:
@@ -555,6 +581,45 @@ def cmd_merge(args: argparse.Namespace) -> int:
         return EXIT_INTERRUPTED
     if not args.quiet:
         print(f"merged {a.spp} + {b.spp} spp -> {merged.spp} spp: {output}", file=sys.stderr)
+    return 0
+
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    from . import scene as scene_mod
+    from .scene.toml_writer import write_scene
+
+    output = Path(args.output or f"{Path(args.scene).stem}.toml")
+    if output.suffix.lower() != ".toml":
+        raise InputError("output must end in .toml", str(output))
+    folder = output.parent if str(output.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputError("output folder does not exist", str(folder))
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError("output folder is not writable", str(folder))
+    try:
+        same = Path(args.scene).resolve() == output.resolve()
+    except OSError:
+        same = False
+    if same:
+        raise InputError("the output would replace the scene it is converted from", str(output))
+    scene = scene_mod.load_scene(args.scene)
+    # The files are written together: a signal while they are is held until all are.
+    with interrupts.deferred() as arrived:
+        written = write_scene(scene, output, args.scene)
+    back = scene_mod.load_scene(output)
+    if back.digest != scene.digest:
+        print(f"tracer: error: {output} reads back as another scene than {args.scene} (scene digests "
+              f"{back.digest[:12]} and {scene.digest[:12]}): please report this", file=sys.stderr)
+        return EXIT_CHECK_FAILED
+    if not args.quiet:
+        meshes = len(written) - 1
+        print(f"{scene.name}: {len(scene.shapes)} shapes, {len(scene.materials.names) - 1} materials, "
+              f"{len(scene.point_position)} point lights -> {output}"
+              + (f" and {meshes} PLY file{'s' if meshes != 1 else ''} beside it" if meshes else ""),
+              file=sys.stderr)
+    if arrived:
+        print(f"tracer: interrupted while writing; {output} was completed first", file=sys.stderr)
+        return EXIT_INTERRUPTED
     return 0
 
 

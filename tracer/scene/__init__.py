@@ -1,17 +1,25 @@
 """Scenes: the model the renderer reads (``model.py``) and the readers that build it.
 
-Readers: ``toml_reader.py`` for tracer's own TOML format (``docs/SCENE_FORMAT.md``); any file
-that is not ``.xml`` is read as TOML. A reader for another format produces the same
-:class:`Scene` and is chosen here by file suffix.
+Readers: ``toml_reader.py`` for tracer's own TOML format (``docs/SCENE_FORMAT.md``) and
+``mitsuba_xml.py`` for Mitsuba 3 XML scenes (``docs/MITSUBA_XML.md``), chosen by file suffix:
+``.xml`` is Mitsuba's, anything else TOML. Both produce the same :class:`Scene`;
+``toml_writer.py`` writes any scene back as TOML (``tracer convert``).
+
+Notes: what a scene asks for that tracer does not do (a Mitsuba scene's integrator, pixel
+filter, ...) is told in one line per load to ``notify``, or, without one, to the handler of
+``tracer.notices`` (the command line prints it on stderr; by default, for API users, it is
+dropped).
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from .. import notices
 from ..errors import InputError
 from .model import Scene, Shape
 from .toml_reader import check_resolution, read_toml_file, scene_from_document
@@ -23,15 +31,21 @@ def default_scene_path() -> Path:
 
 
 def load_scene(source: str | os.PathLike[str] | dict[str, Any], width: int | None = None,
-               height: int | None = None, base_dir: str | os.PathLike[str] | None = None) -> Scene:
+               height: int | None = None, base_dir: str | os.PathLike[str] | None = None,
+               notify: Callable[[str], None] | None = None) -> Scene:
     """Read and validate a scene.
 
-    source : a scene file path, or a scene document as a dict (the TOML file's tables as
-        Python values, e.g. ``{"camera": {...}, "shapes": [...]}``).
+    source : a scene file path (``.xml``: a Mitsuba 3 scene, anything else TOML), or a scene
+        document as a dict (the TOML file's tables as Python values, e.g.
+        ``{"camera": {...}, "shapes": [...]}``).
     width, height : override the camera's resolution.
     base_dir : the folder mesh files are relative to (default: the scene file's folder, or
         the current folder for a dict).
-    Raises ``InputError`` naming the file (``<dict>`` for a dict) and the key at fault.
+    notify : receives, as one line, what the scene asks for and tracer does not do (a
+        Mitsuba scene's integrator, filter, ...); default: ``tracer.notices.note``, which
+        drops it unless a handler was installed (the command line installs one).
+    Raises ``InputError`` naming the file (``<dict>`` for a dict) and the key (for XML: the
+        line and element) at fault.
     """
     if isinstance(source, dict):
         base = Path(base_dir) if base_dir is not None else Path.cwd()
@@ -39,10 +53,11 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any], width: int | Non
     if not isinstance(source, (str, os.PathLike)):
         raise InputError(f"a scene is a file path or a dict, not {type(source).__name__}")
     path = str(source)
-    if Path(path).suffix.lower() == ".xml":
-        raise InputError("Mitsuba XML scenes are not supported yet: tracer reads its TOML scene "
-                         "format (docs/SCENE_FORMAT.md)", path)
     base = Path(base_dir) if base_dir is not None else Path(path).parent
+    if Path(path).suffix.lower() == ".xml":
+        from .mitsuba_xml import read_mitsuba_scene
+
+        return read_mitsuba_scene(path, width, height, base, notify or notices.note)
     return scene_from_document(read_toml_file(path), path, base, width, height)
 
 

@@ -17,6 +17,9 @@ import numpy as np
 
 # Coordinates beyond this magnitude are refused (the scene readers' MAX_COORDINATE).
 MAX_COORDINATE = 1e15
+# A vertex normal whose length is within this of 1 is unit already (float64 rounding of a
+# normalization is ~1e-16).
+UNIT_TOLERANCE = 1e-12
 
 
 class MeshError(ValueError):
@@ -28,7 +31,8 @@ class Mesh:
     """A triangle mesh as read.
 
     vertices : (V, 3) float64.   faces : (F, 3) int64 indices into vertices.
-    normals : (V, 3) float64 unit vertex normals from the file, or None if it has none.
+    normals : (V, 3) float64 unit vertex normals from the file (normalized unless unit already),
+        or None if it has none.
     """
 
     vertices: np.ndarray
@@ -87,7 +91,12 @@ def read_mesh_file(mesh_path: Path) -> Mesh:
         if np.any(used & (length == 0.0)):
             bad = int(np.flatnonzero(used & (length == 0.0))[0])
             raise MeshError(f"{mesh_path} has a zero vertex normal (vertex {bad})")
-        normals = normals / np.where(length > 0.0, length, 1.0)[:, None]
+        # Rows already unit to rounding are kept as written: normalizing them again moves about
+        # one in three by an ulp, and a scene written out (tracer convert) and read back must
+        # hold the very same normals.
+        renormalize = np.abs(length - 1.0) > UNIT_TOLERANCE
+        unit = normals / np.where(length > 0.0, length, 1.0)[:, None]
+        normals = np.where(renormalize[:, None], unit, normals)
     return Mesh(vertices, faces, normals)
 
 

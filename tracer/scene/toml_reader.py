@@ -107,26 +107,7 @@ def scene_from_document(doc: Any, path: str, base: Path, width: int | None = Non
         light.done()
     top.done()
 
-    return Scene(
-        path=path,
-        camera=camera,
-        vertices=geometry.vertices(),
-        faces=geometry.faces(),
-        material=geometry.column(geometry.material, np.int32),
-        emission=geometry.column(geometry.emission, np.float64, (0, 3)),
-        shape_of_triangle=geometry.column(geometry.shape, np.int32),
-        shapes=geometry.shapes,
-        materials=table,
-        # float32, as the light table stores them, so that every table holds the same light.
-        point_position=_float32(point_position),
-        point_intensity=_float32(point_intensity),
-        render_defaults=render,
-        spheres=np.array(geometry.spheres, dtype=np.float64).reshape(-1, 4),
-        sphere_material=np.array(geometry.sphere_material, dtype=np.int32),
-        sphere_emission=np.array(geometry.sphere_emission, dtype=np.float64).reshape(-1, 3),
-        shape_of_sphere=np.array(geometry.shape_of_sphere, dtype=np.int32),
-        corner_normals=geometry.normals(),
-    )
+    return geometry.scene(path, camera, table, point_position, point_intensity, render)
 
 
 def _position(r: "_Reader", name: str, default: Any = ...) -> np.ndarray:
@@ -285,6 +266,7 @@ def _read_camera(r: _Reader, width: int | None, height: int | None) -> Camera:
     fov = r.number("fov", lo=0.0, lo_open=True, hi=179.0)
     w = r.number("width", default=256, lo=1, hi=MAX_SIDE, integer=True)
     h = r.number("height", default=256, lo=1, hi=MAX_SIDE, integer=True)
+    mirrored = r.boolean("mirrored", default=False)
     r.done()
     forward = target - origin
     if np.linalg.norm(forward) <= 1e-12 * max(1.0, float(np.linalg.norm(origin))):
@@ -303,7 +285,7 @@ def _read_camera(r: _Reader, width: int | None, height: int | None) -> Camera:
     elif width is not None:
         w, h = width, height
     check_resolution(w, h, r.path, "camera.width/height")
-    return Camera(origin, target, up, fov, int(w), int(h))
+    return Camera(origin, target, up, fov, int(w), int(h), mirrored=bool(mirrored))
 
 
 def _read_materials(path: str, table: Any) -> materials.MaterialTable:
@@ -375,6 +357,30 @@ class _Geometry:
         self.shape_of_sphere.append(len(self.shapes))
         self.shapes.append(Shape("sphere", self._triangles, 0, material, emission, record,
                                  sphere=len(self.spheres) - 1))
+
+    def scene(self, path: str, camera: Camera, table: materials.MaterialTable, point_position: list,
+              point_intensity: list, render: dict[str, Any]) -> Scene:
+        """The scene of these shapes with the rest a reader read: every reader ends here."""
+        return Scene(
+            path=path,
+            camera=camera,
+            vertices=self.vertices(),
+            faces=self.faces(),
+            material=self.column(self.material, np.int32),
+            emission=self.column(self.emission, np.float64, (0, 3)),
+            shape_of_triangle=self.column(self.shape, np.int32),
+            shapes=self.shapes,
+            materials=table,
+            # float32, as the light table stores them, so that every table holds the same light.
+            point_position=_float32(point_position),
+            point_intensity=_float32(point_intensity),
+            render_defaults=render,
+            spheres=np.array(self.spheres, dtype=np.float64).reshape(-1, 4),
+            sphere_material=np.array(self.sphere_material, dtype=np.int32),
+            sphere_emission=np.array(self.sphere_emission, dtype=np.float64).reshape(-1, 3),
+            shape_of_sphere=np.array(self.shape_of_sphere, dtype=np.int32),
+            corner_normals=self.normals(),
+        )
 
     def vertices(self) -> np.ndarray:
         return np.concatenate(self._vertices) if self._vertices else np.zeros((0, 3))

@@ -1,0 +1,169 @@
+"""Regenerate `tracer/materials/presets.py` from Mitsuba 3's named materials.
+
+    /work/venv-xcheck/bin/python benchmarks/mitsuba_presets.py [-o tracer/materials/presets.py]
+
+Mitsuba's `conductor` and `roughconductor` take `material="Au"` and the like: the name of a
+pair of measured spectra shipped with Mitsuba 3 (`mitsuba/data/ior/NAME.eta.spd` and
+`NAME.k.spd`), which an RGB variant integrates to linear sRGB once, when the BSDF is built
+(`spectrum_list_to_srgb` in `mitsuba/render/ior.h`), and `material="none"`, eta = 0, k = 1,
+a perfect mirror. Dielectric interfaces (`plastic`, `roughplastic`, `dielectric`) take
+`int_ior`/`ext_ior` as a number or a name from a fixed table (`lookup_ior` in the same header).
+
+This script asks Mitsuba itself, in the `scalar_rgb` variant, for every value, so that tracer's
+table holds exactly the numbers Mitsuba renders with:
+
+- conductor names: every stem `NAME` with both `NAME.eta.spd` and `NAME.k.spd` in Mitsuba's
+  data folder, together with the names of Mitsuba's documentation (each must load, or the
+  script stops) and "none"; for each, a `conductor` BSDF is loaded and its traversed
+  `eta.value` and `k.value` (float32 RGB) are read;
+- IOR names: the list Mitsuba prints for an unknown name (its whole table); for each, a
+  `plastic` with `int_ior=NAME, ext_ior=1.0` is loaded, and its traversed `eta`
+  (= int_ior / ext_ior) is the value.
+
+Values are written as the shortest decimal that round-trips to the same float32.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import re
+import sys
+
+import numpy as np
+
+# The names Mitsuba 3's documentation lists for `conductor`'s `material` (plugin reference,
+# "Conductor material"); the data folder may hold more (the *_palik variants, Se-e, ...).
+DOCUMENTED_CONDUCTORS = [
+    "a-C", "Ag", "Al", "AlAs", "AlAs_palik", "AlSb", "AlSb_palik", "Au", "Be", "Be_palik", "Cr",
+    "CsI", "CsI_palik", "Cu", "Cu_palik", "Cu2O", "Cu2O_palik", "CuO", "CuO_palik", "d-C",
+    "d-C_palik", "Hg", "Hg_palik", "HgTe", "HgTe_palik", "Ir", "Ir_palik", "K", "K_palik", "Li",
+    "Li_palik", "MgO", "MgO_palik", "Mo", "Mo_palik", "Na_palik", "Nb", "Nb_palik", "Ni_palik",
+    "Rh", "Rh_palik", "Se", "Se_palik", "SiC", "SiC_palik", "SnTe", "SnTe_palik", "Ta",
+    "Ta_palik", "Te", "Te_palik", "ThF4", "ThF4_palik", "TiC", "TiC_palik", "TiN", "TiN_palik",
+    "TiO2", "TiO2_palik", "VC", "VC_palik", "V_palik", "VN", "VN_palik", "W",
+]
+
+OUTPUT = pathlib.Path(__file__).resolve().parent.parent / "tracer" / "materials" / "presets.py"
+
+
+def f32(x) -> str:
+    """The shortest decimal that reads back as the same float32 (repr of np.float32)."""
+    short = np.format_float_positional(np.float32(x), unique=True, trim="0")
+    assert np.float32(short) == np.float32(x)
+    return short if "." in short else short + ".0"
+
+
+def rgb(value) -> tuple[float, float, float]:
+    """A traversed Color3f (or a scalar, for "none") as three floats."""
+    try:
+        return tuple(float(value[i]) for i in range(3))
+    except TypeError:
+        return (float(value),) * 3
+
+
+def conductor_names(mi) -> list[str]:
+    data = pathlib.Path(mi.__file__).parent / "data" / "ior"
+    stems = {p.name[: -len(".eta.spd")] for p in data.glob("*.eta.spd")}
+    stems &= {p.name[: -len(".k.spd")] for p in data.glob("*.k.spd")}
+    missing = sorted(set(DOCUMENTED_CONDUCTORS) - stems)
+    if missing:
+        print(f"documented names without data files (will be tried anyway): {missing}")
+    return sorted(stems | set(DOCUMENTED_CONDUCTORS), key=str.lower) + ["none"]
+
+
+def read_conductors(mi) -> dict[str, tuple]:
+    table = {}
+    for name in conductor_names(mi):
+        params = mi.traverse(mi.load_dict({"type": "conductor", "material": name}))
+        table[name] = (rgb(params["eta.value"]), rgb(params["k.value"]))
+    return table
+
+
+def ior_names(mi) -> list[str]:
+    """Mitsuba's own list of IOR names, from the error it raises for an unknown one."""
+    try:
+        mi.load_dict({"type": "plastic", "int_ior": "no such material"})
+    except Exception as error:  # noqa: BLE001 - Mitsuba raises a plain RuntimeError
+        match = re.search(r"Valid choices are:\s*(.*)$", str(error), re.S)
+        if match is None:
+            raise RuntimeError(f"unexpected Mitsuba message: {error}") from error
+        return [n.strip() for n in match.group(1).strip().split(",") if n.strip()]
+    raise RuntimeError("Mitsuba accepted an unknown IOR name")
+
+
+def read_iors(mi) -> dict[str, float]:
+    table = {}
+    for name in ior_names(mi):
+        params = mi.traverse(mi.load_dict({"type": "plastic", "int_ior": name, "ext_ior": 1.0}))
+        table[name] = float(params["eta"])
+    return table
+
+
+def render_module(version: str, conductors: dict, iors: dict) -> str:
+    lines = [
+        '"""Named conductors and IORs of Mitsuba 3, as the numbers Mitsuba renders with.',
+        "",
+        "Generated by `benchmarks/mitsuba_presets.py` (run it with Mitsuba to regenerate this",
+        "file; do not edit by hand). Pure data: no numba, nothing imported.",
+        "",
+        "CONDUCTORS: name -> (eta_rgb, k_rgb), the complex index of refraction eta + i k of a",
+        "conductor per linear sRGB channel, for `conductor`/`roughconductor` `material=NAME`.",
+        "The numbers come from the measured spectral data shipped with Mitsuba 3",
+        "(`mitsuba/data/ior/NAME.eta.spd` and `NAME.k.spd`), converted to linear sRGB by",
+        f"Mitsuba {version}'s `scalar_rgb` variant (`spectrum_list_to_srgb`, when the BSDF is",
+        "built) and read back from the loaded BSDF (`mi.traverse`, `eta.value`, `k.value`,",
+        "float32). Where the conversion gives a negative channel (AlAs, AlSb and a few k",
+        "spectra that are nearly 0 in the visible), Mitsuba clamps it to 0 (with a warning), and",
+        "so does this table. Names are case-sensitive, as Mitsuba's file names. `none` is Mitsuba's",
+        "perfect mirror (eta 0, k 1: Fresnel reflectance exactly 1).",
+        "",
+        "IORS: name -> real index of refraction, Mitsuba's table for `int_ior`/`ext_ior` names",
+        "(`lookup_ior` in `mitsuba/render/ior.h`: Hecht, Optics, at about 589 nm), read back as",
+        "a `plastic`'s traversed eta = int_ior / ext_ior with ext_ior = 1. Mitsuba lower-cases",
+        "the name before looking it up (`\"BK7\"` works); the keys here are lower case.",
+        '"""',
+        "",
+        f'MITSUBA_VERSION = "{version}"',
+        "",
+        "CONDUCTORS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {",
+    ]
+    for name, (eta, k) in conductors.items():
+        eta_s = ", ".join(f32(v) for v in eta)
+        k_s = ", ".join(f32(v) for v in k)
+        lines.append(f'    "{name}": (({eta_s}), ({k_s})),')
+    lines += ["}", "", "IORS: dict[str, float] = {"]
+    for name, value in iors.items():
+        lines.append(f'    "{name}": {f32(value)},')
+    lines += ["}", ""]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("-o", "--output", default=str(OUTPUT), help="module to write")
+    args = p.parse_args(argv)
+
+    import mitsuba as mi
+
+    mi.set_variant("scalar_rgb")
+    # Mitsuba warns when it clamps a negative sRGB channel to 0 (see the generated docstring).
+    mi.set_log_level(mi.LogLevel.Error)
+    conductors = read_conductors(mi)
+    iors = read_iors(mi)
+    text = render_module(mi.__version__, conductors, iors)
+    namespace: dict = {}
+    exec(compile(text, args.output, "exec"), namespace)  # the file must read back exactly
+    for name, (eta, k) in conductors.items():
+        got = namespace["CONDUCTORS"][name]
+        assert np.array_equal(np.float32(got[0]), np.float32(eta)), name
+        assert np.array_equal(np.float32(got[1]), np.float32(k)), name
+    for name, value in iors.items():
+        assert np.float32(namespace["IORS"][name]) == np.float32(value), name
+    pathlib.Path(args.output).write_text(text)
+    print(f"{len(conductors)} conductors, {len(iors)} IORs -> {args.output}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

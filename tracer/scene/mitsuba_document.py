@@ -1,0 +1,488 @@
+"""Mitsuba 3 XML documents: parsing, ``<include>``, ``<default>``/``$name``, ``<path>``, ids,
+``<alias>``, and the values of properties and transforms.
+
+:func:`read_document` turns a scene file into one tree of :class:`Element` (each knowing its
+file and line, for messages), with every include spliced in, every ``$name`` substituted and
+every id resolved; :mod:`tracer.scene.mitsuba_xml` reads the plugins from it. The rules are
+Mitsuba 3.9.1's, checked by loading small scenes with it (``tests/test_mitsuba_xml.py``):
+
+- ``<default name value>`` defines ``$name`` for the attributes that FOLLOW it in document
+  order (a use before it is an error), unless ``name`` is already defined (the first wins); a
+  default's own value is substituted when it is read; an undefined ``$name`` is an error.
+- ``<include filename>`` is relative to the including file's folder; the included file's
+  root is a ``<scene>`` whose children take the include's place. Cycles and includes deeper
+  than MAX_INCLUDE_DEPTH are refused.
+- ``<path value>`` adds a folder (relative to the file that names it) searched for relative
+  file names, before the scene file's folder; the latest ``<path>`` is searched first.
+- every object (``bsdf``, ``shape``, ...) may have an ``id``, unique in the scene;
+  ``<ref id>`` stands for it anywhere an object may appear (its ``name`` is ignored, as
+  Mitsuba ignores it); ``<alias id as>`` gives it a second id.
+- transforms compose in document order, each operation applied after the ones before it
+  (left-multiplied): ``<translate x="1"/><scale value="2"/>`` moves the origin to x = 2.
+
+Parsing uses expat, which reports lines; DOCTYPE and entity declarations are refused outright
+(no entity expansion, so no "billion laughs").
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NoReturn
+from xml.parsers import expat
+
+import numpy as np
+
+from ..errors import InputError
+
+MAX_FILE_BYTES = 64 << 20  # far beyond any scene file (meshes live in their own files)
+MAX_INCLUDE_DEPTH = 16
+MAX_FILES = 1000  # files read through includes, in all
+MAX_NESTING = 64  # elements inside elements, includes spliced in
+
+OBJECT_TAGS = frozenset({"scene", "bsdf", "emitter", "shape", "sensor", "film", "sampler", "integrator",
+                         "rfilter", "texture", "medium", "phase", "volume"})
+PROPERTY_TAGS = frozenset({"float", "integer", "boolean", "string", "point", "vector", "rgb", "spectrum",
+                           "transform"})
+TRANSFORM_TAGS = frozenset({"translate", "scale", "rotate", "matrix", "lookat"})
+# The attributes each element may have (Mitsuba refuses others too).
+_ATTRIBUTES = {
+    "scene": {"version", "type", "id"},
+    "ref": {"id", "name"},
+    "default": {"name", "value"},
+    "include": {"filename"},
+    "path": {"value"},
+    "alias": {"id", "as"},
+    "transform": {"name"},
+    "point": {"name", "value", "x", "y", "z"},
+    "vector": {"name", "value", "x", "y", "z"},
+    "spectrum": {"name", "value", "filename", "type", "id"},
+    "translate": {"value", "x", "y", "z"},
+    "scale": {"value", "x", "y", "z"},
+    "rotate": {"value", "x", "y", "z", "angle"},
+    "matrix": {"value"},
+    "lookat": {"origin", "target", "up"},
+}
+_NAME_VALUE = {"name", "value"}
+_OBJECT_ATTRIBUTES = {"type", "id", "name"}
+
+_SUBSTITUTION = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_NOT_FINITE = re.compile(r"[+-]?(?:inf|infinity|nan)", re.IGNORECASE)
+_INTEGER = re.compile(r"-?\d+")
+_SEPARATORS = re.compile(r"[,\s]+")
+
+
+@dataclass(eq=False)
+class Element:
+    """One XML element: its tag, attributes (``$name`` substituted), file and line, children."""
+
+    tag: str
+    attrs: dict[str, str]
+    file: str
+    line: int
+    children: list["Element"] = field(default_factory=list)
+
+    def describe(self) -> str:
+        """``<tag type="..." id="..." name="...">``, the attributes that name it."""
+        shown = "".join(f' {k}="{self.attrs[k]}"' for k in ("type", "id", "name") if k in self.attrs)
+        return f"<{self.tag}{shown}>"
+
+    @property
+    def where(self) -> str:
+        return f"{self.file}:{self.line}"
+
+    def fail(self, message: str, inside: "Element | None" = None) -> NoReturn:
+        """Raise InputError naming this element's file, line and element (and its object)."""
+        key = self.describe() + (f" in {inside.describe()}" if inside is not None else "")
+        raise InputError(message, self.where, key)
+
+    def attr(self, name: str, default: str | None = None) -> str:
+        value = self.attrs.get(name, default)
+        if value is None:
+            self.fail(f"missing attribute '{name}'")
+        return value
+
+
+@dataclass
+class Document:
+    """A scene file with its includes spliced in and its ids resolved.
+
+    root : the ``<scene>`` element (``<default>``, ``<include>``, ``<path>`` and ``<alias>``
+        removed).   ids : id (and alias) -> object element.   search_folders : ``<path>``
+        folders, the latest first.   folder : the scene file's folder.
+    """
+
+    path: str
+    root: Element
+    ids: dict[str, Element]
+    search_folders: list[Path]
+    folder: Path
+
+    def resolve(self, ref: Element) -> Element:
+        """The object a ``<ref id>`` stands for."""
+        target = self.ids.get(ref.attr("id"))
+        if target is None:
+            ref.fail(f"no object has id '{ref.attrs['id']}'")
+        return target
+
+    def find_file(self, name: str, near: Element) -> Path:
+        """A file named in the scene: absolute as is; relative, in the ``<path>`` folders (the
+        latest first), the scene file's folder, then the folder of the file that names it."""
+        given = Path(name)
+        if given.is_absolute():
+            return given
+        folders = [*self.search_folders, self.folder, Path(near.file).parent]
+        for folder in folders:
+            candidate = folder / given
+            try:
+                if candidate.is_file():
+                    return candidate
+            except OSError:
+                continue
+        return self.folder / given  # missing: the reader names it in its message
+
+
+def read_document(path: str, base: Path | None = None) -> Document:
+    """Parse the scene file ``path`` (relative file names resolve against ``base``, default its
+    folder) into a :class:`Document`. Raises InputError with the file and line at fault."""
+    root = _parse_file(path, path)
+    if root.tag != "scene":
+        root.fail("the root element of a Mitsuba scene is <scene>")
+    _check_version(root)
+    state = _Expansion(top=Path(path))
+    root.children = state.expand(root, Path(path).parent, [os.path.realpath(path)], 1)
+    ids = _collect_ids(root, state.aliases)
+    folder = base if base is not None else Path(path).parent
+    return Document(path, root, ids, state.search_folders, folder)
+
+
+def _check_version(scene: Element) -> None:
+    version = scene.attrs.get("version")
+    if version is None:
+        scene.fail("missing attribute 'version' (Mitsuba 3 scenes say <scene version=\"3.0.0\">)")
+    match = re.fullmatch(r"(\d+)\.(\d+)\.(\d+)", version.strip())
+    if not match:
+        scene.fail(f"version '{version}' is not of the form major.minor.patch")
+    if int(match.group(1)) not in (2, 3):
+        scene.fail(f"version {version}: tracer reads Mitsuba 2 and 3 scenes; older scenes use other "
+                   "names (upgrade them with Mitsuba 3 first)")
+
+
+def _parse_file(path: str, shown: str) -> Element:
+    """The element tree of one XML file; ``shown`` names it in messages."""
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)
+    except FileNotFoundError:
+        raise InputError("no such scene file", shown) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, not a scene file", shown) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", shown) from None
+    if len(data) > MAX_FILE_BYTES:
+        raise InputError(f"larger than {MAX_FILE_BYTES >> 20} MiB: not a scene file", shown)
+
+    parser = expat.ParserCreate()
+    stack: list[Element] = []
+    roots: list[Element] = []
+
+    def start(tag: str, attrs: dict[str, str]) -> None:
+        element = Element(tag, dict(attrs), shown, parser.CurrentLineNumber)
+        if len(stack) >= MAX_NESTING:
+            element.fail(f"elements nested more than {MAX_NESTING} deep")
+        (stack[-1].children if stack else roots).append(element)
+        stack.append(element)
+
+    def end(tag: str) -> None:
+        stack.pop()
+
+    def refuse(what: str):
+        def handler(*args) -> None:
+            raise InputError(f"{what} are not allowed in a scene file (no entity expansion)",
+                             f"{shown}:{parser.CurrentLineNumber}")
+        return handler
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    parser.StartDoctypeDeclHandler = refuse("DOCTYPE declarations")
+    parser.EntityDeclHandler = refuse("entity declarations")
+    parser.UnparsedEntityDeclHandler = refuse("entity declarations")
+    parser.ExternalEntityRefHandler = refuse("external entities")
+    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
+    try:
+        parser.Parse(data, True)
+    except expat.ExpatError as exc:
+        raise InputError(f"not well-formed XML: {expat.ErrorString(exc.code)} (column {exc.offset + 1})",
+                         f"{shown}:{exc.lineno}") from None
+    except RecursionError:
+        raise InputError("nested too deeply", shown) from None
+    if not roots:
+        raise InputError("no XML element", shown)
+    return roots[0]
+
+
+class _Expansion:
+    """Splices includes in, substitutes ``$name``, collects ``<path>`` folders and aliases."""
+
+    def __init__(self, top: Path):
+        self.defaults: dict[str, str] = {}
+        self.search_folders: list[Path] = []
+        self.aliases: list[Element] = []
+        self.files = 1
+        self.top = top
+
+    def substitute(self, element: Element) -> None:
+        for key, value in element.attrs.items():
+            if "$" in value:
+                element.attrs[key] = _SUBSTITUTION.sub(lambda m: self._value_of(m, element), value)
+
+    def _value_of(self, match: re.Match, element: Element) -> str:
+        name = match.group(1)
+        if name not in self.defaults:
+            element.fail(f"undefined parameter ${name} (define it with <default name=\"{name}\" value=...> "
+                         "before its first use)")
+        return self.defaults[name]
+
+    def expand(self, parent: Element, folder: Path, chain: list[str], depth: int) -> list[Element]:
+        """``parent``'s children with includes spliced in and directives applied; ``folder``
+        is the folder of the file they are in, ``chain`` the files including it."""
+        out: list[Element] = []
+        for child in parent.children:
+            self.substitute(child)
+            allowed = _ATTRIBUTES.get(child.tag)
+            if allowed is None:
+                allowed = (_OBJECT_ATTRIBUTES if child.tag in OBJECT_TAGS
+                           else _NAME_VALUE if child.tag in PROPERTY_TAGS else set())
+            unexpected = sorted(set(child.attrs) - allowed)
+            known = child.tag in OBJECT_TAGS or child.tag in PROPERTY_TAGS or child.tag in _ATTRIBUTES
+            if unexpected and known:
+                child.fail(f"unexpected attribute '{unexpected[0]}'")
+            if child.tag == "default":
+                self._no_children(child)
+                self.defaults.setdefault(child.attr("name"), child.attr("value"))
+            elif child.tag == "path":
+                self._no_children(child)
+                self.search_folders.insert(0, folder / child.attr("value"))
+            elif child.tag == "alias":
+                self._no_children(child)
+                child.attr("id")
+                child.attr("as")
+                self.aliases.append(child)
+            elif child.tag == "include":
+                self._no_children(child)
+                out.extend(self._include(child, folder, chain, depth))
+            else:
+                if depth + len(chain) > MAX_NESTING:
+                    child.fail(f"elements nested more than {MAX_NESTING} deep (includes included)")
+                child.children = self.expand(child, folder, chain, depth + 1)
+                out.append(child)
+        return out
+
+    @staticmethod
+    def _no_children(element: Element) -> None:
+        if element.children:
+            element.children[0].fail(f"<{element.tag}> takes no child elements")
+
+    def _include(self, include: Element, folder: Path, chain: list[str], depth: int) -> list[Element]:
+        name = include.attr("filename")
+        path = Path(name) if Path(name).is_absolute() else folder / name
+        real = os.path.realpath(path)
+        if real in chain:
+            include.fail(f"include cycle: {path} includes itself (through {len(chain)} file(s))")
+        if len(chain) >= MAX_INCLUDE_DEPTH:
+            include.fail(f"includes nested more than {MAX_INCLUDE_DEPTH} deep")
+        self.files += 1
+        if self.files > MAX_FILES:
+            include.fail(f"more than {MAX_FILES} files included")
+        if not path.is_file():
+            include.fail(f"included file not found: {path}")
+        root = _parse_file(str(path), str(path))
+        if root.tag != "scene":
+            root.fail("an included file's root element is <scene>")
+        self.substitute(root)
+        if "version" in root.attrs:
+            _check_version(root)
+        return self.expand(root, path.parent, [*chain, real], depth)
+
+
+def _collect_ids(root: Element, aliases: list[Element]) -> dict[str, Element]:
+    ids: dict[str, Element] = {}
+    stack = [root]
+    while stack:
+        element = stack.pop()
+        stack.extend(reversed(element.children))
+        plugin = element.tag in OBJECT_TAGS or (element.tag == "spectrum" and "type" in element.attrs)
+        if plugin and element is not root:
+            ident = element.attrs.get("id")
+            if ident is None:
+                continue
+            if ident in ids:
+                element.fail(f"duplicate id '{ident}' (first at {ids[ident].where})")
+            ids[ident] = element
+    for alias in aliases:
+        source, name = alias.attrs["id"], alias.attrs["as"]
+        if source not in ids:
+            alias.fail(f"no object has id '{source}'")
+        if name in ids:
+            alias.fail(f"id '{name}' is taken (at {ids[name].where})")
+        ids[name] = ids[source]
+    return ids
+
+
+# ---------------------------------------------------------------------------------------------
+# Values
+
+
+def number(element: Element, text: str, what: str) -> float:
+    """A finite number written as Mitsuba accepts it (surrounding spaces allowed)."""
+    token = text.strip()
+    if _NOT_FINITE.fullmatch(token):
+        element.fail(f"{what}: expected a finite number, got '{token}'")
+    if not _NUMBER.fullmatch(token):
+        element.fail(f"{what}: expected a number, got '{_short(token)}'")
+    value = float(token)
+    if not math.isfinite(value):
+        element.fail(f"{what}: '{_short(token)}' is not a finite number")
+    return value
+
+
+def integer(element: Element, text: str, what: str) -> int:
+    token = text.strip()
+    if not _INTEGER.fullmatch(token) or len(token) > 30:
+        element.fail(f"{what}: expected a whole number, got '{_short(token)}'")
+    return int(token)
+
+
+def numbers(element: Element, text: str, what: str) -> list[float]:
+    """Numbers separated by commas and/or spaces ("1, 2, 3", "1 2 3")."""
+    return [number(element, token, what) for token in _SEPARATORS.split(text.strip()) if token]
+
+
+def boolean(element: Element, text: str, what: str) -> bool:
+    token = text.strip().lower()
+    if token not in ("true", "false"):
+        element.fail(f"{what}: expected true or false, got '{_short(text)}'")
+    return token == "true"
+
+
+def xyz(element: Element, default: float | None, what: str = "value") -> np.ndarray:
+    """A 3-vector from ``value`` (1 number: all three, or 3) or from ``x``, ``y``, ``z`` (each
+    ``default`` when absent; all required when ``default`` is None)."""
+    given = [k for k in ("x", "y", "z") if k in element.attrs]
+    if "value" in element.attrs:
+        if given:
+            element.fail("give either value or x, y, z, not both")
+        values = numbers(element, element.attrs["value"], what)
+        if len(values) not in (1, 3):
+            element.fail(f"{what}: expected 1 or 3 numbers, got {len(values)}")
+        return np.array(values * 3 if len(values) == 1 else values, dtype=np.float64)
+    out = []
+    for k in ("x", "y", "z"):
+        if k not in element.attrs:
+            if default is None:
+                element.fail(f"missing attribute '{k}' (or value=\"x, y, z\")")
+            out.append(default)
+        else:
+            out.append(number(element, element.attrs[k], k))
+    return np.array(out, dtype=np.float64)
+
+
+def transform_matrix(element: Element) -> np.ndarray:
+    """The 4 x 4 matrix of a ``<transform>``: its operations in order, each left-multiplied."""
+    matrix = np.eye(4)
+    for op in element.children:
+        if op.tag not in TRANSFORM_TAGS:
+            op.fail(f"not a transform operation (expected {', '.join(sorted(TRANSFORM_TAGS))})", element)
+        if op.children:
+            op.children[0].fail(f"<{op.tag}> takes no child elements")
+        with np.errstate(over="ignore", invalid="ignore"):  # refused below when it overflows
+            matrix = _operation(op) @ matrix
+    if not np.all(np.isfinite(matrix)):
+        element.fail("the transform is not finite (its numbers overflow)")
+    return matrix
+
+
+def _operation(op: Element) -> np.ndarray:
+    m = np.eye(4)
+    if op.tag == "translate":
+        m[:3, 3] = xyz(op, 0.0)
+    elif op.tag == "scale":
+        m[:3, :3] = np.diag(xyz(op, 1.0))
+    elif op.tag == "rotate":
+        angle = number(op, op.attr("angle"), "angle")
+        axis = xyz(op, 0.0, "axis")
+        if not np.any(axis):
+            op.fail("the rotation axis is zero")
+        m[:3, :3] = rotation(axis, angle)
+    elif op.tag == "matrix":
+        values = numbers(op, op.attr("value"), "value")
+        if len(values) == 16:
+            m = np.array(values, dtype=np.float64).reshape(4, 4)
+            if not np.array_equal(m[3], [0.0, 0.0, 0.0, 1.0]):
+                op.fail(f"the last row is {m[3].tolist()}, not 0 0 0 1: projective matrices are not "
+                        "supported")
+        elif len(values) == 9:
+            m[:3, :3] = np.array(values, dtype=np.float64).reshape(3, 3)
+        else:
+            op.fail(f"a matrix has 9 or 16 numbers, not {len(values)}")
+    else:
+        m = lookat(op)
+    return m
+
+
+def rotation(axis: np.ndarray, degrees: float) -> np.ndarray:
+    """Rodrigues' rotation by ``degrees`` about ``axis``, counter-clockwise looking down the axis.
+    The axis is used as given, not normalized, as Mitsuba 3.9.1 does (a non-unit axis also
+    scales: ``<rotate x="1" y="1" angle="30"/>`` is not a rotation there either)."""
+    theta = math.radians(degrees)
+    c, s = math.cos(theta), math.sin(theta)
+    x, y, z = axis
+    cross = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return c * np.eye(3) + (1.0 - c) * np.outer(axis, axis) + s * cross
+
+
+def lookat(op: Element) -> np.ndarray:
+    """Mitsuba's look-at matrix: columns left = up x dir, up' = dir x left, dir, origin (a
+    camera looks along its local +z, its local +x to the image's left). Without ``up``, the
+    first vector of Duff et al.'s orthonormal basis of dir (JCGT 6(1), 2017), as Mitsuba."""
+    origin = _vector_attr(op, "origin")
+    target = _vector_attr(op, "target")
+    direction = target - origin
+    length = float(np.linalg.norm(direction))
+    if not length > 0.0 or not math.isfinite(length):
+        op.fail("target equals origin: no viewing direction")
+    direction = direction / length
+    if "up" in op.attrs:
+        up = _vector_attr(op, "up")
+    else:
+        up = _basis_vector(direction)
+    left = np.cross(up, direction)
+    norm = float(np.linalg.norm(left))
+    if not norm > 1e-12 * max(float(np.linalg.norm(up)), 1e-300):
+        op.fail("up is zero or parallel to the viewing direction")
+    left = left / norm
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, np.cross(direction, left), direction, origin
+    return m
+
+
+def _basis_vector(n: np.ndarray) -> np.ndarray:
+    sign = math.copysign(1.0, n[2])
+    a = -1.0 / (sign + n[2])
+    b = n[0] * n[1] * a
+    return np.array([1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]])
+
+
+def _vector_attr(op: Element, name: str) -> np.ndarray:
+    values = numbers(op, op.attr(name), name)
+    if len(values) != 3:
+        op.fail(f"{name}: expected 3 numbers, got {len(values)}")
+    return np.array(values, dtype=np.float64)
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= 40 else text[:37] + "..."
