@@ -16,7 +16,7 @@ k              3      imaginary part (absorption) per channel, >= 0
 
 from __future__ import annotations
 
-from ..jit import jit
+from ..jit import jit, jit_called
 from . import microfacet
 from .base import DELTA, MaterialType, Param, rgb
 
@@ -30,7 +30,7 @@ TYPE = MaterialType(
 REFLECTANCE, ETA, K = TYPE.column("reflectance"), TYPE.column("eta"), TYPE.column("k")
 
 
-@jit
+@jit_called
 def fresnel_rgb(params, row, eta_column: int, k_column: int, cos: float):
     """Per-channel conductor Fresnel of the material in ``row`` at cos (its eta and k at the
     given columns); exactly 1 for the default eta = 0, k = 1, without computing it."""

@@ -29,7 +29,7 @@ import math
 import numpy as np
 
 from .. import warp
-from ..jit import jit
+from ..jit import jit, jit_called
 
 GGX, BECKMANN = 0, 1
 DISTRIBUTIONS = ("ggx", "beckmann")
@@ -55,7 +55,7 @@ def fresnel_dielectric(cos_i: float, eta: float) -> float:
     return 0.5 * (r_parallel * r_parallel + r_perpendicular * r_perpendicular)
 
 
-@jit
+@jit_called
 def fresnel_conductor(cos_i: float, eta: float, k: float) -> float:
     """Unpolarized reflectance of a conductor of complex relative index eta + i k at cos_i."""
     cos_i = min(max(cos_i, 0.0), 1.0)
@@ -89,7 +89,7 @@ def diffuse_fresnel_reflectance(eta: float, nodes: int = 400) -> float:
 # Distributions
 
 
-@jit
+@jit_called
 def erfinv(y: float) -> float:
     """The inverse error function on (-1, 1): a rational first guess (Giles 2012, "Approximating
     the erfinv function", GPU Computing Gems; single precision, and coarser beyond
@@ -135,7 +135,7 @@ def beckmann_d_cos2(cos2_h: float, alpha: float) -> float:
     return math.exp(-tan2 / a2) / (math.pi * a2 * cos2_h * cos2_h)
 
 
-@jit
+@jit_called
 def beckmann_lambda(cos: float, alpha: float) -> float:
     """Smith's Lambda of Beckmann for a direction with cos(theta) = ``cos`` in (0, 1]."""
     sin = math.sqrt(max(0.0, 1.0 - cos * cos))
@@ -172,7 +172,7 @@ def _beckmann_slope_cdf(t: float, tan_theta: float, erf_cot: float, exp_cot: flo
     return 0.5 * (math.erf(t) + erf_cot) + tan_theta / (2.0 * SQRT_PI) * (exp_cot - math.exp(-t * t))
 
 
-@jit
+@jit_called
 def beckmann_visible_normal(wo, alpha: float, u0: float, u1: float):
     """A half vector h distributed as the Beckmann normals visible from local ``wo`` (wo.z > 0)."""
     # Stretch wo to the alpha = 1 configuration.
@@ -319,6 +319,36 @@ def dielectric_reflection_albedo(cos_o: float, alpha: float, distribution: int, 
             wi_z = 2.0 * wo_dot_h * h[2] - cos_o
             if wi_z > 0.0 and wo_dot_h > 0.0:
                 total += fresnel_dielectric(wo_dot_h, eta) * g1(wi_z, alpha, distribution)
+    return total / (nodes * nodes)
+
+
+@jit
+def dielectric_transmission_albedo(cos_o: float, alpha: float, distribution: int, eta: float,
+                                   nodes: int) -> float:
+    """T(cos_o), the energy a rough dielectric interface lets through from the outside toward
+    the inside, as Mitsuba 3 defines it for its rough plastic: the expectation over h from the
+    visible normals of (1 - F(wo.h, eta)) G1(wt), with wt the refraction of wo about h (masked
+    when it leaves on the wrong side of h). Less than 1 - R (``dielectric_reflection_albedo``):
+    the refracted light is shadowed too. Midpoint rule as there."""
+    sin_o = math.sqrt(max(0.0, 1.0 - cos_o * cos_o))
+    wo = (sin_o, 0.0, cos_o)
+    total = 0.0
+    for a in range(nodes):
+        for b in range(nodes):
+            h = visible_normal(wo, alpha, distribution, (a + 0.5) / nodes, (b + 0.5) / nodes)
+            cos_i = wo[0] * h[0] + wo[2] * h[2]
+            if cos_i <= 0.0:
+                continue
+            cos2_t = 1.0 - (1.0 - cos_i * cos_i) / (eta * eta)
+            if cos2_t <= 0.0:  # total internal reflection: nothing passes
+                continue
+            # wt = -wo / eta + (cos_i / eta - cos_t) h, the refracted direction (below).
+            k = cos_i / eta - math.sqrt(cos2_t)
+            wt_z = -wo[2] / eta + k * h[2]
+            wt_dot_h = -cos_i / eta + k
+            if wt_z >= 0.0 or wt_dot_h >= 0.0:
+                continue
+            total += (1.0 - fresnel_dielectric(cos_i, eta)) * g1(-wt_z, alpha, distribution)
     return total / (nodes * nodes)
 
 

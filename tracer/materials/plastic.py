@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import warp
-from ..jit import jit
+from ..jit import jit, jit_called
 from . import microfacet
 from .base import DELTA, DIFFUSE, MaterialType, Param, rgb
 
@@ -90,7 +90,7 @@ def specular_probability(reflected: float, weight: float) -> float:
     return specular / total if total > 0.0 else 0.0
 
 
-@jit
+@jit_called
 def eval_pdf(params, row, wo, wi):
     """(f, pdf) of the base: R' (1 - F_o)(1 - F_i) / (pi eta^2), and its selection probability
     times the cosine pdf."""
@@ -104,7 +104,7 @@ def eval_pdf(params, row, wo, wi):
     return (albedo[0] * c, albedo[1] * c, albedo[2] * c), p
 
 
-@jit
+@jit_called
 def sample(params, row, wo, u_lobe, u0, u1):
     """The coating's mirror direction (delta) or a cosine-weighted direction into the base."""
     if wo[2] <= 0.0:

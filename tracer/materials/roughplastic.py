@@ -4,14 +4,16 @@
               + R' T(cos_o) T(cos_i) / (pi eta^2)
 
 The coating is a microfacet reflector (GGX or Beckmann, ``microfacet``) with the exact
-dielectric Fresnel term of eta = int_ior / ext_ior. T(mu) = 1 - R_c(mu) is the energy the
-rough coating lets through at incidence cos = mu, R_c its directional albedo; R' = R / (1 -
-R_int) (``nonlinear``: R / (1 - R R_int)) with R_int = 2 integral R_c(mu; 1/eta) mu dmu the
-coating's diffuse reflectance from inside. As in Mitsuba, T is a table of TABLE_SIZE values at
-mu = j / (TABLE_SIZE - 1), read by linear interpolation; tracer integrates each entry with a
-QUADRATURE x QUADRATURE midpoint rule over the visible-normal sampler's square (the integrand
-vanishes with G1 at the horizon, so the rule converges as 1 / n^2) and R_int with the
-trapezoid rule over the same nodes.
+dielectric Fresnel term of eta = int_ior / ext_ior. T(mu) is the energy the rough coating lets
+through at incidence cos = mu, as Mitsuba 3 defines it: (1 - F) times the masking G1 of the
+refracted direction, averaged over the visible normals (so T < 1 - R_c, R_c the coating's
+directional albedo). R' = R / (1 - R_int) (``nonlinear``: R / (1 - R R_int)) with R_int
+= 2 integral R_c(mu; 1/eta) mu dmu the coating's diffuse reflectance from inside, estimated as
+Mitsuba does, by twice the mean of R_c mu over the table's nodes. As in Mitsuba, T is a table
+of TABLE_SIZE values at mu = j / (TABLE_SIZE - 1) (mu = 1e-6 for j = 0), read by linear
+interpolation; tracer integrates each entry with a QUADRATURE x QUADRATURE midpoint rule over
+the visible-normal sampler's square (the integrands vanish with G1 at the horizon, so the rule
+converges as 1 / n^2). The model is Mitsuba's, not energy-exact: T + R_c < 1.
 
 Sampling (Mitsuba's lobe selection): the coating with probability proportional to
 (1 - T(cos_o)) w_s, the base with T(cos_o) (1 - w_s) (w_s as ``plastic``); the coating by its
@@ -32,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import warp
-from ..jit import jit
+from ..jit import jit, jit_called
 from . import microfacet
 from .base import DIFFUSE, GLOSSY, MaterialType, Param, rgb
 from .plastic import COATING_PARAMS, base_albedo, coating_constants, specular_probability
@@ -47,14 +49,13 @@ def _derive(values: dict[str, object]) -> dict[str, object]:
     out = coating_constants(values)
     alpha, distribution = float(values["alpha"]), int(values["distribution"])
     mu = np.maximum(_NODES, 1e-6)
-    def albedo(eta: float) -> np.ndarray:
-        return np.array([microfacet.dielectric_reflection_albedo(m, alpha, distribution, eta, QUADRATURE)
-                         for m in mu])
-
-    outside, inside = albedo(out["eta"]), albedo(1.0 / out["eta"])
-    out["transmittance"] = 1.0 - outside
-    integrand = 2.0 * inside * _NODES
-    out["internal_reflectance"] = float(np.sum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(_NODES)))
+    eta = out["eta"]
+    out["transmittance"] = [microfacet.dielectric_transmission_albedo(m, alpha, distribution, eta, QUADRATURE)
+                            for m in mu]
+    inside = np.array([microfacet.dielectric_reflection_albedo(m, alpha, distribution, 1.0 / eta, QUADRATURE)
+                       for m in mu])
+    # Mitsuba's estimate of 2 integral R mu dmu: twice the mean over the table's nodes.
+    out["internal_reflectance"] = float(2.0 * np.mean(inside * mu))
     return out
 
 
@@ -83,7 +84,7 @@ def transmittance(params, row, mu: float) -> float:
     return (1.0 - t) * params[row, TRANSMITTANCE + i] + t * params[row, TRANSMITTANCE + i + 1]
 
 
-@jit
+@jit_called
 def eval_pdf(params, row, wo, wi):
     """(f, pdf): coating plus base, and the lobe-mixture pdf."""
     if wo[2] <= 0.0 or wi[2] <= 0.0:
@@ -101,7 +102,7 @@ def eval_pdf(params, row, wo, wi):
     return f, p_coating * pdf_coating + (1.0 - p_coating) * warp.cosine_hemisphere_pdf(wi[2])
 
 
-@jit
+@jit_called
 def sample(params, row, wo, u_lobe, u0, u1):
     """A direction from the coating's visible normals or the cosine warp; weight f cos / pdf of
     the mixture."""
