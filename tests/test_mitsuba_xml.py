@@ -1051,3 +1051,28 @@ def test_render_reference_compare_and_check_take_xml_scenes(tmp_path, capsys):
     assert err == [f'tracer: error: {bad}:4: <bsdf type="dielectric" id="glass">: dielectric is not '
                    "supported (tracer renders direct light only: light through a dielectric arrives along "
                    "paths of two or more bounces)"]
+
+
+def test_hostile_documents_are_refused_in_one_line(tmp_path):
+    """Found by an adversarial run: an unknown encoding (expat raised LookupError), $name
+    defaults that double at every step (a billion laughs without entities: memory ran away),
+    an include name too long for the file system (OSError) and a version of 5000 digits
+    (Python's integer-digit limit) each give InputError in one line, quickly."""
+    cases = {
+        "encoding": ('<?xml version="1.0" encoding="klingon"?><scene version="3.0.0"/>', ["klingon"]),
+        "laughs": ('<scene version="3.0.0"><default name="a0" value="xxxxxxxxxx"/>'
+                   + "".join(f'<default name="a{i + 1}" value="$a{i}$a{i}"/>' for i in range(40))
+                   + "</scene>", ["longer than", "$names"]),
+        "long include": (f'<scene version="3.0.0"><include filename="{"a" * 5000}.xml"/></scene>',
+                         ["cannot look up the included file"]),
+        "long version": (f'<scene version="3{"0" * 5000}.0.0"/>', ["not of the form major.minor.patch"]),
+    }
+    for name, (text, words) in cases.items():
+        path = tmp_path / f"{name.replace(' ', '_')}.xml"
+        path.write_text(text)
+        with pytest.raises(InputError) as caught:
+            load_scene(path)
+        message = str(caught.value)
+        assert "\n" not in message and len(message) < 400, message
+        for word in words:
+            assert word in message, (name, message)

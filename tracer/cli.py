@@ -239,6 +239,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(STEM_shapeN.ply).")
     cv.add_argument("scene", help="scene file (.xml: Mitsuba 3; anything else: TOML)")
     cv.add_argument("-o", "--output", help="TOML file to write (default: SCENE.toml here)")
+    cv.add_argument("--width", type=_side, help="film width to convert at (a Mitsuba scene's field of view "
+                    "follows its fov_axis; the TOML holds the vertical angle at this size)")
+    cv.add_argument("--height", type=_side, help="film height to convert at")
     cv.add_argument("--quiet", action="store_true", help="no summary line")
     cv.set_defaults(run=cmd_convert)
     return parser
@@ -602,7 +605,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
         same = False
     if same:
         raise InputError("the output would replace the scene it is converted from", str(output))
-    scene = scene_mod.load_scene(args.scene)
+    scene = scene_mod.load_scene(args.scene, width=args.width, height=args.height)
     # The files are written together: a signal while they are is held until all are.
     with interrupts.deferred() as arrived:
         written = write_scene(scene, output, args.scene)

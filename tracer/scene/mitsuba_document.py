@@ -42,6 +42,7 @@ MAX_FILE_BYTES = 64 << 20  # far beyond any scene file (meshes live in their own
 MAX_INCLUDE_DEPTH = 16
 MAX_FILES = 1000  # files read through includes, in all
 MAX_NESTING = 64  # elements inside elements, includes spliced in
+MAX_SUBSTITUTED = 1 << 20  # characters of an attribute after $name substitution
 
 OBJECT_TAGS = frozenset({"scene", "bsdf", "emitter", "shape", "sensor", "film", "sampler", "integrator",
                          "rfilter", "texture", "medium", "phase", "volume"})
@@ -164,9 +165,10 @@ def _check_version(scene: Element) -> None:
     version = scene.attrs.get("version")
     if version is None:
         scene.fail("missing attribute 'version' (Mitsuba 3 scenes say <scene version=\"3.0.0\">)")
-    match = re.fullmatch(r"(\d+)\.(\d+)\.(\d+)", version.strip())
+    match = re.fullmatch(r"([0-9]{1,6})\.([0-9]{1,6})\.([0-9]{1,6})", version.strip())
     if not match:
-        scene.fail(f"version '{version}' is not of the form major.minor.patch")
+        shown = version if len(version) <= 40 else version[:37] + "..."
+        scene.fail(f"version '{shown}' is not of the form major.minor.patch")
     if int(match.group(1)) not in (2, 3):
         scene.fail(f"version {version}: tracer reads Mitsuba 2 and 3 scenes; older scenes use other "
                    "names (upgrade them with Mitsuba 3 first)")
@@ -218,6 +220,8 @@ def _parse_file(path: str, shown: str) -> Element:
     except expat.ExpatError as exc:
         raise InputError(f"not well-formed XML: {expat.ErrorString(exc.code)} (column {exc.offset + 1})",
                          f"{shown}:{exc.lineno}") from None
+    except LookupError as exc:  # an encoding declaration Python does not know
+        raise InputError(f"not readable XML: {exc}", shown) from None
     except RecursionError:
         raise InputError("nested too deeply", shown) from None
     if not roots:
@@ -238,7 +242,13 @@ class _Expansion:
     def substitute(self, element: Element) -> None:
         for key, value in element.attrs.items():
             if "$" in value:
-                element.attrs[key] = _SUBSTITUTION.sub(lambda m: self._value_of(m, element), value)
+                value = _SUBSTITUTION.sub(lambda m: self._value_of(m, element), value)
+                # Defaults that repeat one another grow exponentially (a billion laughs made of
+                # $names): refuse a value past any plausible size as soon as one appears.
+                if len(value) > MAX_SUBSTITUTED:
+                    element.fail(f"attribute '{key}' is longer than {MAX_SUBSTITUTED} characters after "
+                                 "substituting $names")
+                element.attrs[key] = value
 
     def _value_of(self, match: re.Match, element: Element) -> str:
         name = match.group(1)
@@ -298,8 +308,13 @@ class _Expansion:
         self.files += 1
         if self.files > MAX_FILES:
             include.fail(f"more than {MAX_FILES} files included")
-        if not path.is_file():
-            include.fail(f"included file not found: {path}")
+        try:
+            found = path.is_file()
+        except (OSError, ValueError) as exc:  # a name too long for the file system, a NUL byte
+            include.fail(f"cannot look up the included file {str(path)[:80]}...: "
+                         f"{getattr(exc, 'strerror', None) or exc}")
+        if not found:
+            include.fail(f"included file not found (or not a regular file): {path}")
         root = _parse_file(str(path), str(path))
         if root.tag != "scene":
             root.fail("an included file's root element is <scene>")
