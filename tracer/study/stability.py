@@ -111,9 +111,9 @@ def cases(size: int = SIZE) -> list[Case]:
              blind=("uniform", "cosine", "light"), testable=("bsdf", "mis")),
         Case("beckmann_1e-3_small_light", "Beckmann alpha 1e-3 under a small light",
              testable=("bsdf", "mis")),
-        Case("plastic_small_light", "smooth plastic: a delta coating over a diffuse base",
+        Case("plastic_small_light", "smooth plastic: light sampling cannot see the coating",
              testable=("mis",)),
-        Case("roughplastic_small_light", "rough plastic (Beckmann 0.02) under a small light",
+        Case("roughplastic_small_light", "rough plastic (Beckmann 0.02): BSDF sampling misses the light",
              testable=("mis",)),
     ]
     for scale in ("0.001", "1000"):
