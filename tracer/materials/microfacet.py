@@ -303,33 +303,16 @@ def visible_normal_pdf(h: np.ndarray, wo: np.ndarray, alpha: np.ndarray, distrib
 
 
 @jit
-def dielectric_reflection_albedo(cos_o: float, alpha: float, distribution: int, eta: float,
-                                 nodes: int) -> float:
-    """R(cos_o) = integral of F(wo.h, eta) D G / (4 cos_o cos_i) cos_i over wi, the energy a rough
-    dielectric interface reflects (Mitsuba's roughplastic mixes its diffuse base by 1 - R): the
-    expectation of F(wo.h) G1(wi) over h from the visible normals, by a midpoint rule of
-    ``nodes`` x ``nodes`` points on the sampler's unit square."""
-    sin_o = math.sqrt(max(0.0, 1.0 - cos_o * cos_o))
-    wo = (sin_o, 0.0, cos_o)
-    total = 0.0
-    for a in range(nodes):
-        for b in range(nodes):
-            h = visible_normal(wo, alpha, distribution, (a + 0.5) / nodes, (b + 0.5) / nodes)
-            wo_dot_h = wo[0] * h[0] + wo[2] * h[2]
-            wi_z = 2.0 * wo_dot_h * h[2] - cos_o
-            if wi_z > 0.0 and wo_dot_h > 0.0:
-                total += fresnel_dielectric(wo_dot_h, eta) * g1(wi_z, alpha, distribution)
-    return total / (nodes * nodes)
-
-
-@jit
-def dielectric_transmission_albedo(cos_o: float, alpha: float, distribution: int, eta: float,
-                                   nodes: int) -> float:
-    """T(cos_o), the energy a rough dielectric interface lets through from the outside toward
-    the inside, as Mitsuba 3 defines it for its rough plastic: the expectation over h from the
-    visible normals of (1 - F(wo.h, eta)) G1(wt), with wt the refraction of wo about h (masked
-    when it leaves on the wrong side of h). Less than 1 - R (``dielectric_reflection_albedo``):
-    the refracted light is shadowed too. Midpoint rule as there."""
+def dielectric_albedo(cos_o: float, alpha: float, distribution: int, eta: float, nodes: int,
+                      transmitted: bool) -> float:
+    """The energy a rough dielectric interface of relative index ``eta`` reflects (R) or, with
+    ``transmitted``, lets through toward the inside (T), for light arriving at cos_o, as Mitsuba
+    3 defines both for its rough plastic: expectations over h from the visible normals of
+    F(wo.h) G1(wi), wi the reflection of wo about h, and of (1 - F(wo.h)) G1(wt), wt its
+    refraction (masked when it leaves on the wrong side of h), so that T < 1 - R: the refracted
+    light is shadowed too. By a midpoint rule of ``nodes`` x ``nodes`` points on the sampler's
+    unit square (both integrands vanish with G1 at the horizon: the rule converges as
+    1 / nodes^2)."""
     sin_o = math.sqrt(max(0.0, 1.0 - cos_o * cos_o))
     wo = (sin_o, 0.0, cos_o)
     total = 0.0
@@ -338,6 +321,11 @@ def dielectric_transmission_albedo(cos_o: float, alpha: float, distribution: int
             h = visible_normal(wo, alpha, distribution, (a + 0.5) / nodes, (b + 0.5) / nodes)
             cos_i = wo[0] * h[0] + wo[2] * h[2]
             if cos_i <= 0.0:
+                continue
+            if not transmitted:
+                wi_z = 2.0 * cos_i * h[2] - cos_o
+                if wi_z > 0.0:
+                    total += fresnel_dielectric(cos_i, eta) * g1(wi_z, alpha, distribution)
                 continue
             cos2_t = 1.0 - (1.0 - cos_i * cos_i) / (eta * eta)
             if cos2_t <= 0.0:  # total internal reflection: nothing passes

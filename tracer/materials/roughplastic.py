@@ -50,9 +50,9 @@ def _derive(values: dict[str, object]) -> dict[str, object]:
     alpha, distribution = float(values["alpha"]), int(values["distribution"])
     mu = np.maximum(_NODES, 1e-6)
     eta = out["eta"]
-    out["transmittance"] = [microfacet.dielectric_transmission_albedo(m, alpha, distribution, eta, QUADRATURE)
+    out["transmittance"] = [microfacet.dielectric_albedo(m, alpha, distribution, eta, QUADRATURE, True)
                             for m in mu]
-    inside = np.array([microfacet.dielectric_reflection_albedo(m, alpha, distribution, 1.0 / eta, QUADRATURE)
+    inside = np.array([microfacet.dielectric_albedo(m, alpha, distribution, 1.0 / eta, QUADRATURE, False)
                        for m in mu])
     # Mitsuba's estimate of 2 integral R mu dmu: twice the mean over the table's nodes.
     out["internal_reflectance"] = float(2.0 * np.mean(inside * mu))
