@@ -19,7 +19,7 @@ from tracer.film import Film, merge_renders
 from tracer.imagefiles import read_exr, write_exr
 from tracer.render_loop import RenderResult, RenderSettings, render
 from tracer.scene import load_scene
-from tracer.strategy import STRATEGIES, Strategy
+from tracer.strategy import CLASSIC_STRATEGIES, Strategy
 from tracer.study import compare as compare_mod
 from tracer.study import metrics
 from tracer.study.compare import Comparison, fit_convergence, time_to_reach
@@ -180,7 +180,7 @@ def test_compare_writes_every_file_and_true_numbers(tmp_path):
         )
         == 0
     )
-    names = list(STRATEGIES)
+    names = list(CLASSIC_STRATEGIES)  # what compare runs when no strategies are named
     for name in names:
         for suffix in (".exr", ".png", "_relerr.png", "_flip.png"):
             assert (out / f"{name}{suffix}").is_file(), name + suffix
@@ -644,6 +644,29 @@ def test_compare_takes_a_list_of_light_samplings(tmp_path):
     # Where each technique wins: its efficiency map against the strategy's first technique.
     assert (out / "efficiency_light_solid-angle_vs_light.png").is_file()
     assert (out / "efficiency_bsdf_vs_light.png").is_file()
+
+
+def test_compare_takes_light_selections_and_ris_settings(tmp_path):
+    """--light-selection power,bvh and --ris-candidates 2,4 --ris-sources light,light+bsdf are
+    dimensions: each strategy that takes light samples runs with each selection, ris with each
+    candidate count and source; files and rows are named apart and the records say what ran."""
+    scene, ref = small_reference(tmp_path)
+    out = tmp_path / "cmp"
+    assert main(["compare", scene, "--reference", str(ref), "--spp", "2", "--out", str(out), "--quiet",
+                 "--strategies", "bsdf,mis,ris", "--light-selection", "power,bvh", "--ris-candidates", "2,4",
+                 "--ris-sources", "light,light+bsdf"]) == 0
+    rows = {r["name"]: r for r in json.loads((out / "metrics.json").read_text())["results"]}
+    ris = {f"ris_{counts}{selection}" for counts in ("m2", "m4", "l1_b1", "l2_b2")
+           for selection in ("", "_bvh-lights")}
+    assert set(rows) == {"bsdf", "mis", "mis_bvh-lights"} | ris
+    assert rows["ris_l2_b2_bvh-lights"]["light_selection"] == "bvh"
+    assert (rows["ris_l2_b2"]["light_samples"], rows["ris_l2_b2"]["bsdf_samples"]) == (2, 2)
+    assert rows["bsdf"]["light_selection"] == "none"
+    record = read_exr(out / "ris_m4_bvh-lights.exr").record
+    assert (record.strategy, record.light_selection, record.light_samples, record.bsdf_samples) == \
+        ("ris", "bvh", 4, 0)
+    assert main(["compare", scene, "--reference", str(ref), "--spp", "2", "--out", str(out), "--quiet",
+                 "--strategies", "ris", "--ris-sources", "light+bsdf", "--ris-candidates", "1"]) == 2
 
 
 def test_compare_takes_a_list_of_samplers(tmp_path):

@@ -23,7 +23,7 @@ import numpy as np
 from .film import Film
 from .sampler_choice import DEFAULT_SAMPLER, SAMPLERS
 from .scene import Scene, load_scene
-from .strategy import DEFAULT_LIGHT_SAMPLING, Strategy
+from .strategy import DEFAULT_LIGHT_SAMPLING, DEFAULT_RIS_CANDIDATES, Strategy
 
 __all__ = ["Image", "Scene", "Strategy", "compare", "load_scene", "read_image", "render"]
 
@@ -74,12 +74,18 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
            spp: int = 64, seed: int = 0, *, threads: int | None = None, heuristic: str = "power",
            light_samples: int = 1, bsdf_samples: int = 1, one_sample: bool = False,
            light_selection: str = "power", light_sampling: str | None = None, sampler: str | None = None,
+           ris_candidates: int = DEFAULT_RIS_CANDIDATES, ris_sources: str = "light",
            progress: bool = False) -> Image:
     """Render ``scene`` (a :class:`Scene`, or a path or dict for :func:`load_scene`) with
     ``spp`` samples per pixel.
 
-    strategy : ``uniform``, ``cosine``, ``bsdf``, ``light`` or ``mis``, or a :class:`Strategy`
-        (then the keyword options heuristic ... light_sampling are ignored).
+    strategy : ``uniform``, ``cosine``, ``bsdf``, ``light``, ``mis`` or ``ris``, or a
+        :class:`Strategy` (then the keyword options heuristic ... ris_sources are ignored).
+    light_selection : ``power``, ``uniform`` or ``bvh`` (a light BVH: by an importance bound at
+        the shading point; pays with many lights).
+    ris_candidates, ris_sources : ``ris`` keeps one of ``ris_candidates`` candidates per camera
+        sample, all light samples (``"light"``) or half of them BSDF samples (``"light+bsdf"``);
+        light_samples and bsdf_samples are then not used (``Strategy.ris``).
     light_sampling : ``area``, ``solid-angle`` or ``solid-angle-cos`` (default: the scene's
         ``[render] light_sampling``, else ``Strategy``'s default).
     sampler : ``independent``, ``stratified`` or ``sobol`` (default: the scene's ``[render]
@@ -95,8 +101,12 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
     if not isinstance(strategy, Strategy):
         sampling = light_sampling if light_sampling is not None else \
             scene.render_defaults.get("light_sampling", DEFAULT_LIGHT_SAMPLING)
-        strategy = Strategy(strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection,
-                            sampling)
+        if strategy == "ris":
+            strategy = Strategy.ris(ris_candidates, ris_sources, heuristic=heuristic,
+                                    light_selection=light_selection, light_sampling=sampling)
+        else:
+            strategy = Strategy(strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection,
+                                sampling)
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
         raise ValueError(f"spp must be a whole number >= 1, got {spp!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:

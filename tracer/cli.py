@@ -43,6 +43,16 @@ _spp = _int_in(1, MAX_SPP)
 _seed = _int_in(0, 2**64 - 1)
 _threads = _int_in(1, 1024)
 _samples_per_camera_sample = _int_in(0, 1_000_000)
+_ris_candidates = _int_in(1, 1_000_000)
+
+
+def _counts(text: str) -> list[int]:
+    """An argparse type: a comma-separated list of distinct ris candidate counts."""
+    values = [_ris_candidates(part.strip()) for part in text.split(",") if part.strip()]
+    if not values or len(set(values)) != len(values):
+        raise argparse.ArgumentTypeError("expected distinct whole numbers >= 1, comma-separated, "
+                                         f"got '{text[:40]}'")
+    return values
 _side = _int_in(1, 2**31 - 1)
 
 
@@ -76,7 +86,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .strategy import STRATEGIES
+    from .strategy import CLASSIC_STRATEGIES, STRATEGIES
 
     parser = _Parser(
         prog="tracer", description="Direct-lighting path tracer for comparing sampling strategies.")
@@ -121,8 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "efficiency-ratio maps, metrics.json/csv and index.html.")
     c.add_argument("scene", help="scene file")
     c.add_argument("--reference", required=True, help="reference EXR (tracer reference)")
-    c.add_argument("--strategies", default=",".join(STRATEGIES),
-                   help="comma-separated strategies (default: all five)")
+    c.add_argument("--strategies", default=",".join(CLASSIC_STRATEGIES),
+                   help=f"comma-separated strategies, some of {', '.join(STRATEGIES)} (default: all but ris)")
     budget = c.add_mutually_exclusive_group(required=True)
     budget.add_argument("--spp", type=_spp, help="equal samples: every strategy renders N spp")
     budget.add_argument("--time", type=_positive_float, metavar="SECONDS",
@@ -249,17 +259,47 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_strategy_options(p: argparse.ArgumentParser, compared: bool = False) -> None:
     """The estimator's options; with ``compared``, ``--light-sampling`` takes a list."""
-    from .strategy import DEFAULT_LIGHT_SAMPLING, HEURISTICS, LIGHT_SAMPLINGS, LIGHT_SELECTIONS
+    from .strategy import (
+        DEFAULT_LIGHT_SAMPLING,
+        DEFAULT_RIS_CANDIDATES,
+        HEURISTICS,
+        LIGHT_SAMPLINGS,
+        LIGHT_SELECTIONS,
+        RIS_SOURCES,
+    )
 
-    p.add_argument("--heuristic", choices=HEURISTICS, default="power", help="MIS heuristic (default power)")
+    p.add_argument("--heuristic", choices=HEURISTICS, default="power",
+                   help="MIS heuristic (default power); also weights ris's candidates of two techniques")
     p.add_argument("--light-samples", type=_samples_per_camera_sample, default=1, metavar="N",
                    help="light samples per camera sample (light, mis; default 1)")
     p.add_argument("--bsdf-samples", type=_samples_per_camera_sample, default=1, metavar="M",
                    help="direction samples per camera sample (uniform, cosine, bsdf, mis; default 1)")
     p.add_argument("--one-sample", action="store_true",
                    help="one-sample MIS: each camera sample picks light or BSDF with probability N:M")
-    p.add_argument("--light-selection", choices=LIGHT_SELECTIONS, default="power",
-                   help="how to pick the light to sample (default: in proportion to power)")
+    selections = "power (in proportion to power), uniform, or bvh (a light BVH: by an importance bound at " \
+        "the shading point)"
+    ris_sources = "light (light samples) or light+bsdf (half of them BSDF samples, MIS-weighted)"
+    if compared:
+        p.add_argument("--light-selection", type=_names_of(LIGHT_SELECTIONS), default=["power"],
+                       metavar="LIST",
+                       help=f"comma-separated light selections to compare, each with every strategy that "
+                       f"takes light samples: some of {selections} (default power)")
+        p.add_argument("--ris-candidates", type=_counts, default=[DEFAULT_RIS_CANDIDATES],
+                       metavar="LIST",
+                       help=f"comma-separated candidate counts M of the ris strategy, one run each "
+                       f"(default {DEFAULT_RIS_CANDIDATES})")
+        p.add_argument("--ris-sources", type=_names_of(RIS_SOURCES), default=[RIS_SOURCES[0]],
+                       metavar="LIST",
+                       help=f"comma-separated sources of ris's candidates: some of {ris_sources} "
+                       "(default light)")
+    else:
+        p.add_argument("--light-selection", choices=LIGHT_SELECTIONS, default="power",
+                       help=f"how to pick the light to sample: {selections}; default power")
+        p.add_argument("--ris-candidates", type=_ris_candidates, default=DEFAULT_RIS_CANDIDATES,
+                       metavar="M",
+                       help=f"ris: candidates per camera sample (default {DEFAULT_RIS_CANDIDATES})")
+        p.add_argument("--ris-sources", choices=RIS_SOURCES, default=RIS_SOURCES[0],
+                       help=f"ris: where candidates come from: {ris_sources}; default light")
     if compared:
         p.add_argument("--light-sampling", type=_light_samplings, default=None, metavar="LIST",
                        help="comma-separated light-sampling techniques to compare, each with every "
@@ -365,16 +405,28 @@ def _terminate_like_ctrl_c() -> None:
         signal.signal(signal.SIGTERM, handler)
 
 
-def _strategy_from(args: argparse.Namespace, name: str, light_sampling: str | None = None):
+def _strategy_from(args: argparse.Namespace, name: str, light_sampling: str | None = None,
+                   light_selection: str | None = None, ris: tuple[int, str] | None = None):
     """The strategy ``name`` with the command line's options; the light sampling is
-    ``light_sampling``, else ``--light-sampling``, else the default."""
-    from .strategy import DEFAULT_LIGHT_SAMPLING, Strategy
+    ``light_sampling``, else ``--light-sampling``, else the default; the light selection and
+    ris's ``(candidates, sources)`` likewise (compare's options are lists, which its caller
+    expands)."""
+    from .strategy import DEFAULT_LIGHT_SAMPLING, DEFAULT_RIS_CANDIDATES, RIS_SOURCES, Strategy
 
-    given = getattr(args, "light_sampling", None)  # compare's is a list, handled by its caller
-    sampling = light_sampling or (given if isinstance(given, str) else None) or DEFAULT_LIGHT_SAMPLING
+    def given(option):
+        value = getattr(args, option, None)
+        return value if isinstance(value, (str, int)) else None
+
+    sampling = light_sampling or given("light_sampling") or DEFAULT_LIGHT_SAMPLING
+    selection = light_selection or given("light_selection") or "power"
     try:
+        if name == "ris":
+            candidates, sources = ris or (given("ris_candidates") or DEFAULT_RIS_CANDIDATES,
+                                          given("ris_sources") or RIS_SOURCES[0])
+            return Strategy.ris(candidates, sources, heuristic=args.heuristic, light_selection=selection,
+                                light_sampling=sampling)
         return Strategy(name, args.heuristic, args.light_samples, args.bsdf_samples,
-                        args.one_sample, args.light_selection, sampling)
+                        args.one_sample, selection, sampling)
     except ValueError as exc:
         raise InputError(str(exc), "command line") from None
 
@@ -658,10 +710,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
             return comparison.equal_time(strategy, args.time, sampler)
         return comparison.equal_spp(strategy, args.spp, sampler)
 
-    # Every strategy with every light sampling asked for; those without light samples once.
+    # Every strategy with every light sampling and selection asked for (those without light
+    # samples once), and ris with every candidate count and source.
     samplings = args.light_sampling or [scene.render_defaults.get("light_sampling")]
-    strategies = [_strategy_from(args, name, sampling) for name in names
-                  for sampling in (samplings if _strategy_from(args, name).light_count else samplings[:1])]
+    ris_settings = [(m, sources) for sources in args.ris_sources for m in args.ris_candidates]
+    def takes_lights(name, ris):
+        return _strategy_from(args, name, ris=ris).light_count > 0
+
+    selections = args.light_selection
+    strategies = [_strategy_from(args, name, sampling, selection, ris) for name in names
+                  for ris in (ris_settings if name == "ris" else [None])
+                  for sampling in (samplings if takes_lights(name, ris) else samplings[:1])
+                  for selection in (selections if takes_lights(name, ris) else selections[:1])]
     sampler_names = args.sampler or [scene.render_defaults.get("sampler", DEFAULT_SAMPLER)]
 
     mode = report.describe_mode(args.spp, args.time, args.clock)
@@ -677,7 +737,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
                                               sampler=sampler)
             first_sampling = _strategy_from(args, "mis", samplings[0]).light_sampling
             allocation = [run(Strategy("mis", args.heuristic, n_light, n_bsdf,
-                                       light_selection=args.light_selection, light_sampling=first_sampling),
+                                       light_selection=args.light_selection[0],
+                                       light_sampling=first_sampling),
                               sampler_names[0])
                           for n_light, n_bsdf in ALLOCATIONS]
     except KeyboardInterrupt:

@@ -28,6 +28,35 @@ weights. Samples that can only contribute 0 cast no ray: a light sample with zer
 direction sample whose ray meets none of the emitters' bounding spheres (``lights.may_reach``).
 Every random number is ``u(seed, pixel, sample index, dimension)`` from the render's sampler,
 with the dimensions of ``tracer.samplers.dimensions``.
+
+**Resampled importance sampling** (``ris``; Talbot, Cline and Egbert, "Importance Resampling
+for Global Illumination", EGSR 2005). A shading point draws N light and M BSDF candidates y_j,
+exactly the samples MIS with N + M samples would take, and computes for each the value v_j that
+MIS would add if its ray were unblocked: f Le |cos| m_j / p_j (RGB), m_j the heuristic's weight
+over the count-scaled pdfs divided by the candidate's count (1 / N for a light-only ris). It
+keeps one candidate J with probability w_J / sum w, w_j = mean(v_j) (so the target is
+p̂ = mean(f Le |cos|), unshadowed), casts one shadow ray for it, and adds
+
+    v_J / mean(v_J) * sum_j w_j = f Le |cos| / p̂ (y_J) * sum_j m_j p̂(y_j) / p_j(y_j)
+
+if it is unblocked. E[...] = sum_j E[m_j f V / p_j] = integral of f V times sum_j m_j, so the
+estimate is unbiased when (1) the weights m_j sum to 1 wherever f V > 0 (they are MIS weights
+over the techniques that can produce the point; a delta light or lobe has one technique and
+m = 1 / its count), (2) p̂ > 0 wherever f V > 0 (p̂ is f Le |cos| itself, unshadowed, and every
+channel is >= 0, so their mean is 0 only where all are) and (3) a candidate with p̂ > 0 has a
+pdf > 0 under its own technique (it was drawn from it). Visibility is the one factor p̂ leaves
+out, which is where RIS fails: a target that ranks occluded lights highly wastes its one
+shadow ray (``test_stability``'s heavy-occlusion row).
+
+Candidates cost shading, not rays: a light candidate needs no ray at all, and a BSDF candidate
+finds the emitter its direction meets with a ray against the emitters alone (a second Embree
+scene of the emitting triangles and spheres, ``SceneRays(emitters_only=True)``); the first
+emitter along a direction is the only one whose light could arrive from it, so its (unshadowed)
+value is that emitter's, and condition (1) holds since MIS weights the pair (direction, first
+emitter). The kept candidate is chosen by weighted reservoir sampling in one pass: candidate j
+replaces the kept one with probability w_j / (w_1 + ... + w_j), decided by one uniform number
+that is rescaled after every decision (dimension ``TECHNIQUE_CHOICE``), so the choice is the
+same at any batch size.
 """
 
 from __future__ import annotations
@@ -47,6 +76,7 @@ from .samplers import dimensions
 from .scene import Scene
 from .strategy import Strategy
 
+ONE_BELOW = 1.0 - 2.0 ** -53  # the largest float64 below 1: a rescaled uniform stays in [0, 1)
 # Codes of the direction techniques for compiled code.
 NO_DIRECTIONS, UNIFORM, COSINE, BSDF = 0, 1, 2, 3
 DIRECTION_CODE = {None: NO_DIRECTIONS, "uniform": UNIFORM, "cosine": COSINE, "bsdf": BSDF}
@@ -75,9 +105,10 @@ class Surfaces(NamedTuple):
 class Plan(NamedTuple):
     """A strategy as the kernels read it.
 
-    n_light, n_dir : samples per shading point of each technique (0 if unused).
+    n_light, n_dir : samples per shading point of each technique (0 if unused); ris: candidates.
     direction : direction technique code.   heuristic : MIS heuristic code.
     one_sample : one-sample MIS.   c_light : probability of the light technique in it.
+    ris : resample one candidate per shading point (module docstring).
     """
 
     n_light: int
@@ -86,6 +117,19 @@ class Plan(NamedTuple):
     heuristic: int
     one_sample: bool
     c_light: float
+    ris: bool
+
+
+class Reservoirs(NamedTuple):
+    """Per camera lane, the candidates ris has seen (the kept one's ray is the lane's row of the
+    shadow buffer): weight (n,) their sum of w_j; u (n,) the rescaled resampling uniform."""
+
+    weight: np.ndarray
+    u: np.ndarray
+
+    @classmethod
+    def empty(cls, count: int) -> "Reservoirs":
+        return cls(np.empty(count), np.empty(count))
 
 
 class DirectLighting:
@@ -97,6 +141,9 @@ class DirectLighting:
         self.rays = SceneRays(scene, caster)
         self.caster = self.rays.caster
         self.lights = LightSampler(scene, strategy.light_selection, strategy.light_sampling)
+        ris = strategy.name == "ris"
+        # ris's BSDF candidates find their emitter without the occluders.
+        self.emitter_rays = SceneRays(scene, emitters_only=True) if ris and strategy.direction_count else None
         m = scene.materials
         self.surfaces = Surfaces(np.ascontiguousarray(scene.hit_table), np.ascontiguousarray(m.kind),
                                  np.ascontiguousarray(m.params, dtype=np.float64),
@@ -104,7 +151,8 @@ class DirectLighting:
                                  int(scene.triangle_count), np.ascontiguousarray(scene.corner_normals))
         n_light, n_dir = strategy.light_count, strategy.direction_count
         self.plan = Plan(n_light, n_dir, DIRECTION_CODE[strategy.direction_technique],
-                         mis.code(strategy.heuristic), strategy.one_sample_mis, n_light / (n_light + n_dir))
+                         mis.code(strategy.heuristic), strategy.one_sample_mis, n_light / (n_light + n_dir),
+                         ris)
 
     def radiance(self, origins: np.ndarray, dirs: np.ndarray, seed: int = 0, pixel: np.ndarray | None = None,
                  sample: np.ndarray | None = None, sampler: str = "independent") -> np.ndarray:
@@ -129,16 +177,25 @@ class DirectLighting:
         """:meth:`radiance` for the render loop: float32 rays, a built sampler, int64 lanes."""
         n = len(origins)
         plan = self.plan
-        shadow = RayBuffer.empty(n if plan.one_sample else n * plan.n_light)
+        shadow = RayBuffer.empty(n if plan.one_sample or plan.ris else n * plan.n_light)
         direction = RayBuffer.empty(n if plan.one_sample else n * plan.n_dir)
+        reservoirs = Reservoirs.empty(n if plan.ris else 0)
         prim = self.rays.first_hit(origins, dirs)
         radiance = np.empty((n, 3))
         tables = self.lights.tables
         n_shadow, n_direction = _shade(prim, origins, dirs, sampler, pixel, sample, self.surfaces, tables,
-                                       plan, radiance, shadow, direction)
-        s, d = slice(0, n_shadow), slice(0, n_direction)
+                                       plan, radiance, shadow, direction, reservoirs)
+        d = slice(0, n_direction)
+        if plan.ris:
+            # The BSDF candidates meet their emitters; one shadow ray per lane for the kept one.
+            found = self.emitter_rays.first_hit(direction.origin[d], direction.dir[d]) if n_direction \
+                else np.zeros(0, dtype=np.int32)
+            n_shadow = _resample(radiance, self.surfaces, tables, plan, direction, found, shadow, reservoirs)
+            d, found = slice(0, 0), found[:0]
+        s = slice(0, n_shadow)
         blocked = self.rays.occluded(shadow.origin[s], shadow.dir[s], shadow.tmax[s])
-        found = self.rays.first_hit(direction.origin[d], direction.dir[d])
+        if not plan.ris:
+            found = self.rays.first_hit(direction.origin[d], direction.dir[d])
         _gather(radiance, self.surfaces, tables, plan, shadow, blocked, direction, found)
         return radiance
 
@@ -151,8 +208,9 @@ class RayBuffer(NamedTuple):
     tmax : (c,) float32 shadow-ray length (shadow rays only).
     value : (c, 3) what the sample adds if its ray is unblocked (shadow) or hits an emitter
         (direction; then times the emitter's radiance and the MIS weight).
-    point, normal : (c, 3) float64 shading point the ray leaves and its normal (direction rays
-        only): the light pdf of the direction is measured from them, as light sampling does.
+    point, normal, shading : (c, 3) float64 shading point the ray leaves, its geometric and
+        its shading normal (direction rays only): the light pdf of the direction is measured
+        from them, as light sampling does.
     pdf : (c,) count-scaled pdf of the direction technique (direction rays only, for MIS).
     lane : (c,) camera lane the sample belongs to.   delta : (c,) a delta sample (weight 1).
     """
@@ -163,6 +221,7 @@ class RayBuffer(NamedTuple):
     value: np.ndarray
     point: np.ndarray
     normal: np.ndarray
+    shading: np.ndarray
     pdf: np.ndarray
     lane: np.ndarray
     delta: np.ndarray
@@ -172,7 +231,7 @@ class RayBuffer(NamedTuple):
         f32 = np.float32
         return cls(np.empty((count, 3), dtype=f32), np.empty((count, 3), dtype=f32),
                    np.empty(count, dtype=f32), np.empty((count, 3)), np.empty((count, 3)),
-                   np.empty((count, 3)), np.empty(count),
+                   np.empty((count, 3)), np.empty((count, 3)), np.empty(count),
                    np.empty(count, dtype=np.int64), np.empty(count, dtype=np.bool_))
 
 
@@ -185,24 +244,31 @@ class RayBuffer(NamedTuple):
 
 @jit
 def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, light_tables, plan: Plan,
-           radiance, shadow: RayBuffer, direction: RayBuffer):
+           radiance, shadow: RayBuffer, direction: RayBuffer, reservoirs: Reservoirs):
     """Camera hits -> emission seen directly into ``radiance (n, 3)``, and the shadow and
-    direction rays of every shading point into the buffers. Returns their counts."""
+    direction rays of every shading point into the buffers. Returns their counts. ris: the
+    light candidates go through ``reservoirs`` (the kept one in the lane's shadow row) and the
+    direction rays are the BSDF candidates, for ``_resample``."""
     hit_table, kinds, params, eps = (surfaces.hit_table, surfaces.material_kind, surfaces.material_params,
                                      surfaces.eps)
     first_sphere, twosided, corner_normals = surfaces.first_sphere, surfaces.twosided, surfaces.corner_normals
     alias_prob, alias, pmf = light_tables.alias_prob, light_tables.alias, light_tables.pmf
+    nodes, child = light_tables.nodes, light_tables.child
     technique, rows, spheres = light_tables.technique, light_tables.rows, light_tables.spheres
+    weight_sum, u_left = reservoirs.weight, reservoirs.u
     shadow_origin, shadow_dir, shadow_tmax = shadow.origin, shadow.dir, shadow.tmax
     shadow_value, shadow_lane = shadow.value, shadow.lane
     dir_origin, dir_dir = direction.origin, direction.dir
-    dir_value, dir_point, dir_normal = direction.value, direction.point, direction.normal
+    dir_value, dir_point, dir_normal, dir_shading = direction.value, direction.point, direction.normal, \
+        direction.shading
     dir_pdf, dir_lane, dir_delta = direction.pdf, direction.lane, direction.delta
     n_light, n_dir = float(plan.n_light), float(plan.n_dir)
     n_shadow = 0
     n_direction = 0
     for lane in range(len(prim)):
         radiance[lane, 0] = radiance[lane, 1] = radiance[lane, 2] = 0.0
+        if plan.ris:
+            weight_sum[lane] = 0.0
         p = prim[lane]
         if p < 0:
             continue
@@ -233,6 +299,8 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         s, t = basis(normal)
         wo = to_local(s, t, normal, scale(-1.0, d))
         state = samplers.start(sampler, pixel[lane], sample[lane])
+        if plan.ris:
+            u_left[lane] = samplers.uniform(sampler, state, dimensions.TECHNIQUE_CHOICE)
 
         # Which samples this point takes: (light samples, direction samples, their counts).
         if plan.one_sample:
@@ -247,7 +315,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         for j in range(lights_here):
             u = samplers.uniform_pair(sampler, state, dimensions.light_point(j))
             wi_world, dist, le, pdf_light, delta = lights.sample(
-                alias_prob, alias, pmf, technique, rows, x, geometric,
+                alias_prob, alias, pmf, nodes, child, technique, rows, x, geometric, normal,
                 samplers.uniform(sampler, state, dimensions.light_choice(j)), u[0], u[1])
             if not pdf_light > 0.0:
                 continue
@@ -264,6 +332,10 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
             # The shadow ray runs from the offset origin to the sampled point, stopping short of it.
             origin = offset_origin(x, eps, geometric, wi_world)
             to_target, length = normalized(sub(add_scaled(x, dist, wi_world), origin))
+            if plan.ris:
+                _offer(shadow_origin, shadow_dir, shadow_tmax, shadow_value, weight_sum, u_left, radiance,
+                       lane, origin, to_target, max(length - eps, 0.0), value)
+                continue
             shadow_tmax[n_shadow] = max(length - eps, 0.0)
             n_shadow = _put(shadow_origin, shadow_dir, shadow_value, shadow_lane, n_shadow,
                             origin, to_target, value, lane)
@@ -288,6 +360,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
             for axis in range(3):
                 dir_point[n_direction, axis] = x[axis]
                 dir_normal[n_direction, axis] = geometric[axis]
+                dir_shading[n_direction, axis] = normal[axis]
             n_direction = _put(dir_origin, dir_dir, dir_value, dir_lane, n_direction,
                                origin, wi_world, value, lane)
     return n_shadow, n_direction
@@ -349,39 +422,139 @@ def _gather(radiance, surfaces: Surfaces, light_tables, plan: Plan, shadow: RayB
             direction: RayBuffer, prim):
     """Add to ``radiance`` the light samples whose shadow rays are unblocked, and the direction
     samples whose rays hit the front of an emitter, weighted against the light technique."""
-    hit_table, first_sphere = surfaces.hit_table, surfaces.first_sphere
-    pmf, technique, rows = light_tables.pmf, light_tables.technique, light_tables.rows
-    candidate_of_prim = light_tables.candidate_of_prim
     shadow_value, shadow_lane = shadow.value, shadow.lane
     for row in range(len(blocked)):
         if not blocked[row]:
             lane = shadow_lane[row]
             for c in range(3):
                 radiance[lane, c] += shadow_value[row, c]
+    hit_table, first_sphere = surfaces.hit_table, surfaces.first_sphere
     other = plan.c_light if plan.one_sample else float(plan.n_light)
-    dirs, values, points, pdfs = direction.dir, direction.value, direction.point, direction.pdf
-    normals, origins, lanes, deltas = direction.normal, direction.origin, direction.lane, direction.delta
+    tables, rays = _pdf_arrays(light_tables), _direction_arrays(direction)
+    lanes = direction.lane
     for row in range(len(prim)):
-        p = prim[row]
-        if p < 0:
+        if prim[row] < 0:
             continue
-        wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
-        x = (points[row, 0], points[row, 1], points[row, 2])
-        if p < first_sphere:
-            cos_normal = hit_table[p, 9] * wi[0] + hit_table[p, 10] * wi[1] + hit_table[p, 11] * wi[2]
-            dist = _plane_distance(hit_table, p, x, cos_normal) if cos_normal < 0.0 else 0.0
-        else:  # the sphere point the ray found, and its distance from the shading point
-            o = (float(origins[row, 0]), float(origins[row, 1]), float(origins[row, 2]))
-            y, _, cos_normal = surface_point(hit_table, first_sphere, p, o, wi)
-            v = sub(y, x)
-            dist = math.sqrt(dot(v, v))
-        if not cos_normal < 0.0:
-            continue  # emitters shine from the front only
-        w = 1.0
-        if other > 0.0 and not deltas[row]:
-            n = (normals[row, 0], normals[row, 1], normals[row, 2])
-            pdf_light = lights.pdf(pmf, technique, rows, candidate_of_prim, x, n, p, wi, dist)
-            w = mis.weight_of(plan.heuristic, pdfs[row], other * pdf_light)
-        lane = lanes[row]
+        hit, _, value = _direction_value(hit_table, first_sphere, tables, plan.heuristic, other, rays, row,
+                                         prim[row])
+        if hit:
+            lane = lanes[row]
+            for c in range(3):
+                radiance[lane, c] += value[c]
+
+
+@jit
+def _pdf_arrays(light_tables):
+    """The light tables' arrays that the light pdf of a direction reads, as one plain tuple."""
+    t = light_tables
+    return t.pmf, t.nodes, t.child, t.trail, t.trail_depth, t.technique, t.rows, t.candidate_of_prim
+
+
+@jit
+def _direction_arrays(direction: RayBuffer):
+    """The direction buffer's arrays that ``_direction_value`` reads, as one plain tuple."""
+    return (direction.dir, direction.value, direction.point, direction.normal, direction.shading,
+            direction.origin, direction.pdf, direction.delta)
+
+
+@jit
+def _direction_value(hit_table, first_sphere: int, tables, heuristic: int, other: float, rays, row: int,
+                     p: int):
+    """What direction sample ``row``, whose ray hits primitive ``p``, adds: ``(hit, dist,
+    value)``, value = its weight x the emitter's radiance x its MIS weight against ``other``
+    (the light technique's count) (RGB), dist the emitter's distance from the shading point,
+    hit False if it adds nothing (the emitter's back side). ``tables`` and ``rays`` are tuples of
+    the light tables' and the direction buffer's arrays, unpacked by the caller before its loop
+    (a named tuple's field read in the loop costs a reference-count update)."""
+    pmf, nodes, child, trail, trail_depth, technique, light_rows, candidate_of_prim = tables
+    dirs, values, points, normals, shadings, origins, pdfs, deltas = rays
+    wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
+    x = (points[row, 0], points[row, 1], points[row, 2])
+    if p < first_sphere:
+        cos_normal = hit_table[p, 9] * wi[0] + hit_table[p, 10] * wi[1] + hit_table[p, 11] * wi[2]
+        dist = _plane_distance(hit_table, p, x, cos_normal) if cos_normal < 0.0 else 0.0
+    else:  # the sphere point the ray found, and its distance from the shading point
+        o = (float(origins[row, 0]), float(origins[row, 1]), float(origins[row, 2]))
+        y, _, cos_normal = surface_point(hit_table, first_sphere, p, o, wi)
+        v = sub(y, x)
+        dist = math.sqrt(dot(v, v))
+    if not cos_normal < 0.0:
+        return False, 0.0, (0.0, 0.0, 0.0)  # emitters shine from the front only
+    w = 1.0
+    if other > 0.0 and not deltas[row]:
+        n = (normals[row, 0], normals[row, 1], normals[row, 2])
+        receiver = (shadings[row, 0], shadings[row, 1], shadings[row, 2])
+        pdf_light = lights.pdf(pmf, nodes, child, trail, trail_depth, technique, light_rows,
+                               candidate_of_prim, x, n, receiver, p, wi, dist)
+        w = mis.weight_of(heuristic, pdfs[row], other * pdf_light)
+    return True, dist, (values[row, 0] * hit_table[p, 12] * w, values[row, 1] * hit_table[p, 13] * w,
+                        values[row, 2] * hit_table[p, 14] * w)
+
+
+@jit
+def _offer(origins, dirs, tmaxs, values, weight_sum, u_left, radiance, lane: int, origin, direction,
+           tmax: float, value) -> None:
+    """ris: offer a candidate whose unblocked contribution would be ``value`` (RGB, as MIS
+    would add it) and whose shadow ray is ``origin, direction, tmax`` to ``lane``'s reservoir;
+    kept, it replaces the lane's shadow row. Weight w = mean(value); a non-finite one marks the
+    lane NaN (the render loop counts and zeroes it)."""
+    w = (value[0] + value[1] + value[2]) / 3.0
+    if not w < math.inf:
+        radiance[lane, 0] = math.nan
+        return
+    if not w > 0.0:
+        return
+    total = weight_sum[lane] + w
+    weight_sum[lane] = total
+    keep = w / total
+    u = u_left[lane]
+    if u < keep:
+        u_left[lane] = min(u / keep, ONE_BELOW)
         for c in range(3):
-            radiance[lane, c] += values[row, c] * hit_table[p, 12 + c] * w
+            origins[lane, c] = origin[c]
+            dirs[lane, c] = direction[c]
+            values[lane, c] = value[c]
+        tmaxs[lane] = tmax
+    else:
+        u_left[lane] = min((u - keep) / (1.0 - keep), ONE_BELOW)
+
+
+@jit
+def _resample(radiance, surfaces: Surfaces, light_tables, plan: Plan, direction: RayBuffer, prim,
+              shadow: RayBuffer, reservoirs: Reservoirs) -> int:
+    """ris: offer the BSDF candidates (direction rows, whose rays met the emitters ``prim``) to
+    their lanes' reservoirs; then turn each lane's kept candidate into its shadow ray carrying
+    v_J / mean(v_J) * sum w, packed into rows 0 .. count - 1. Returns the count."""
+    eps, hit_table, first_sphere = surfaces.eps, surfaces.hit_table, surfaces.first_sphere
+    shadow_origin, shadow_dir, shadow_tmax = shadow.origin, shadow.dir, shadow.tmax
+    shadow_value, shadow_lane = shadow.value, shadow.lane
+    weight_sum, u_left = reservoirs.weight, reservoirs.u
+    tables, rays = _pdf_arrays(light_tables), _direction_arrays(direction)
+    dirs, points, origins, lanes = direction.dir, direction.point, direction.origin, direction.lane
+    for row in range(len(prim)):
+        if prim[row] < 0:
+            continue
+        hit, dist, value = _direction_value(hit_table, first_sphere, tables, plan.heuristic,
+                                            float(plan.n_light), rays, row, prim[row])
+        if not hit:
+            continue
+        x = (points[row, 0], points[row, 1], points[row, 2])
+        wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
+        origin = (float(origins[row, 0]), float(origins[row, 1]), float(origins[row, 2]))
+        to_target, length = normalized(sub(add_scaled(x, dist, wi), origin))
+        _offer(shadow_origin, shadow_dir, shadow_tmax, shadow_value, weight_sum, u_left, radiance,
+               lanes[row], origin, to_target, max(length - eps, 0.0), value)
+    count = 0
+    for lane in range(len(weight_sum)):
+        if not weight_sum[lane] > 0.0:
+            continue
+        kept_weight = (shadow_value[lane, 0] + shadow_value[lane, 1] + shadow_value[lane, 2]) / 3.0
+        scale_by = weight_sum[lane] / kept_weight
+        for c in range(3):  # count <= lane: rows move down only
+            shadow_origin[count, c] = shadow_origin[lane, c]
+            shadow_dir[count, c] = shadow_dir[lane, c]
+            shadow_value[count, c] = shadow_value[lane, c] * scale_by
+        shadow_tmax[count] = shadow_tmax[lane]
+        shadow_lane[count] = lane
+        count += 1
+    return count

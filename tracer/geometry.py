@@ -157,27 +157,46 @@ def _spheres_block(blocked, origins, dirs, tmax, spheres) -> None:
 
 
 class SceneRays:
-    """Closest hits and occlusion against a scene's triangles and analytic spheres.
+    """Closest hits and occlusion against a scene's triangles and analytic spheres, or with
+    ``emitters_only`` against its emitting ones alone (the occluders left out: where a direction
+    meets the first emitter, as ris's BSDF candidates need, ``tracer.estimators``).
 
     caster : the Embree scene of the triangles (built here unless given).
-    spheres : (S, 4) float64 centre and radius.   first_sphere : F, the id of sphere 0.
+    spheres : (S, 4) float64 centre and radius.   first_sphere : the local id of sphere 0.
+    ids : None, or (local triangles + spheres,) int32 the scene primitive id of each local one.
     Thread-safe after construction, as ``RayCaster`` is.
     """
 
-    def __init__(self, scene, caster: RayCaster | None = None):
+    def __init__(self, scene, caster: RayCaster | None = None, emitters_only: bool = False):
+        self.ids = None
+        if emitters_only:
+            # The same float32 vertices, so that Embree finds the same hits as in the full scene.
+            tri = np.flatnonzero(scene.emission.max(axis=1, initial=0.0) > 0.0)
+            sph = np.flatnonzero(scene.sphere_emission.max(axis=1, initial=0.0) > 0.0)
+            used, local = np.unique(scene.faces[tri], return_inverse=True)
+            caster = RayCaster(scene.vertices[used], local.reshape(-1, 3))
+            self.spheres = np.ascontiguousarray(scene.spheres[sph], dtype=np.float64).reshape(-1, 4)
+            self.first_sphere = len(tri)
+            self.ids = np.concatenate([tri, scene.triangle_count + sph]).astype(np.int32)
+        else:
+            self.spheres = np.ascontiguousarray(scene.spheres, dtype=np.float64).reshape(-1, 4)
+            self.first_sphere = int(scene.triangle_count)
         self.caster = caster if caster is not None else RayCaster(scene.vertices, scene.faces)
-        self.spheres = np.ascontiguousarray(scene.spheres, dtype=np.float64).reshape(-1, 4)
-        self.first_sphere = int(scene.triangle_count)
 
     def first_hit(self, origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
         """(n,) int32 id of the primitive each ray ``origins, dirs (n, 3)`` float32 hits first,
         -1 on a miss."""
         if not len(self.spheres):
-            return self.caster.first_hit(origins, dirs)
-        hits = self.caster.intersect(origins, dirs)  # the triangles' distances, to compare with
-        prim = np.array(hits.prim, dtype=np.int32)
-        _nearer_spheres(prim, hits.t, origins, dirs, self.spheres, self.first_sphere)
-        return prim
+            prim = self.caster.first_hit(origins, dirs)
+        else:
+            hits = self.caster.intersect(origins, dirs)  # the triangles' distances, to compare with
+            prim = np.array(hits.prim, dtype=np.int32)
+            _nearer_spheres(prim, hits.t, origins, dirs, self.spheres, self.first_sphere)
+        if self.ids is None:
+            return prim
+        if not len(self.ids):
+            return np.full(len(prim), -1, dtype=np.int32)
+        return np.where(prim >= 0, self.ids[np.maximum(prim, 0)], -1).astype(np.int32)
 
     def occluded(self, origins: np.ndarray, dirs: np.ndarray, tmax: np.ndarray) -> np.ndarray:
         """(n,) bool: a triangle or a sphere lies on the segment origin + t dir, 0 < t < tmax."""

@@ -5,7 +5,8 @@ choices in ``--help`` without compiling anything. The estimator that runs a stra
 ``tracer.estimators``; the heuristics themselves are ``tracer.mis``.
 
 A strategy is a pair of sample counts per camera sample (Mitsuba's ``emitter_samples`` and
-``bsdf_samples``) and the technique that draws the directions:
+``bsdf_samples``) and the technique that draws the directions; for ``ris`` the counts are of
+candidates, of which one is kept and shadow-tested (``tracer.estimators``):
 
 =========  ==============  =================  ===============================
 strategy   light samples   direction samples  direction technique
@@ -15,6 +16,7 @@ cosine     0               M                  cosine-weighted hemisphere
 bsdf       0               M                  the material's own sampling
 light      N               0                  -
 mis        N               M                  the material's, weighted by MIS
+ris        N candidates    M candidates       the material's; one candidate kept
 =========  ==============  =================  ===============================
 """
 
@@ -22,15 +24,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-STRATEGIES = ("uniform", "cosine", "bsdf", "light", "mis")
+STRATEGIES = ("uniform", "cosine", "bsdf", "light", "mis", "ris")
+# What ``compare`` runs when no strategies are named: the five classic ones (``ris`` is asked for).
+CLASSIC_STRATEGIES = STRATEGIES[:5]
 HEURISTICS = ("balance", "power", "max")
-LIGHT_SELECTIONS = ("power", "uniform")
+LIGHT_SELECTIONS = ("power", "uniform", "bvh")
+# Where ris's candidates come from (``Strategy.ris``): light samples only, or both techniques.
+RIS_SOURCES = ("light", "light+bsdf")
+DEFAULT_RIS_CANDIDATES = 16
 # How a chosen light is sampled (``tracer.lights``): by area, by solid angle, or by solid angle
 # warped toward the receiver's cosine.
 LIGHT_SAMPLINGS = ("area", "solid-angle", "solid-angle-cos")
 DEFAULT_LIGHT_SAMPLING = "area"
 # The direction technique of each strategy that takes direction samples.
-DIRECTION_TECHNIQUE = {"uniform": "uniform", "cosine": "cosine", "bsdf": "bsdf", "mis": "bsdf"}
+DIRECTION_TECHNIQUE = {"uniform": "uniform", "cosine": "cosine", "bsdf": "bsdf", "mis": "bsdf", "ris": "bsdf"}
 
 
 @dataclass(frozen=True)
@@ -38,13 +45,16 @@ class Strategy:
     """How to estimate direct light: a strategy name and its sample counts.
 
     name : one of ``STRATEGIES``.
-    heuristic : the MIS heuristic (``balance``, ``power`` with beta = 2, ``max``); used by ``mis``.
-    light_samples : light samples per camera sample; used by ``light`` and ``mis``.
+    heuristic : the MIS heuristic (``balance``, ``power`` with beta = 2, ``max``); used by ``mis``,
+        and by ``ris`` to weight candidates from two techniques.
+    light_samples : light samples per camera sample; used by ``light`` and ``mis`` (``ris``:
+        light candidates).
     bsdf_samples : direction samples per camera sample; used by ``uniform``, ``cosine``,
-        ``bsdf`` and ``mis``.
+        ``bsdf`` and ``mis`` (``ris``: BSDF candidates).
     one_sample : one-sample MIS: each camera sample takes one technique, chosen with
         probability light_samples : bsdf_samples.
-    light_selection : how the light to sample is chosen (``power`` or ``uniform``).
+    light_selection : how the light to sample is chosen (``power``, ``uniform``, or ``bvh``: by a
+        light BVH's importance at the shading point).
     light_sampling : how a point or direction on the chosen light is drawn (``area``,
         ``solid-angle``, ``solid-angle-cos``); used by ``light`` and ``mis`` (whose BSDF samples
         are weighted with its pdf).
@@ -77,18 +87,38 @@ class Strategy:
                 raise ValueError(f"{field_name} must be a whole number >= 0, got {count!r}")
         if self.light_count + self.direction_count == 0:
             raise ValueError(f"strategy {self.name!r} with these counts takes no samples")
+        if self.name == "ris" and self.light_samples == 0:
+            raise ValueError("ris needs light_samples >= 1 (light candidates)")
+
+    @classmethod
+    def ris(cls, candidates: int = DEFAULT_RIS_CANDIDATES, sources: str = "light", **options) -> "Strategy":
+        """``ris`` with ``candidates`` M per shading point: all light samples (``sources`` =
+        ``light``), or M - M // 2 light and M // 2 BSDF samples (``light+bsdf``, M >= 2)."""
+        if sources not in RIS_SOURCES:
+            raise ValueError(f"unknown ris sources {sources!r}; expected one of {', '.join(RIS_SOURCES)}")
+        if isinstance(candidates, bool) or not isinstance(candidates, int) or candidates < 1:
+            raise ValueError(f"ris candidates must be a whole number >= 1, got {candidates!r}")
+        if sources == "light+bsdf" and candidates < 2:
+            raise ValueError("ris with light+bsdf candidates needs at least 2")
+        bsdf = candidates // 2 if sources == "light+bsdf" else 0
+        return cls("ris", light_samples=candidates - bsdf, bsdf_samples=bsdf, **options)
 
     @property
     def label(self) -> str:
         """A short description such as ``mis (power, 1 light + 1 bsdf)``."""
-        uniform = self.light_count and self.light_selection == "uniform"
-        selection = ", lights picked uniformly" if uniform else ""
+        picked = {"uniform": ", lights picked uniformly", "bvh": ", lights picked by BVH"}
+        selection = picked.get(self.light_selection, "") if self.light_count else ""
         if self.light_count and self.light_sampling != DEFAULT_LIGHT_SAMPLING:
             selection += f", {self.light_sampling} light sampling"
         if self.name == "mis":
             mode = "one-sample, " if self.one_sample else ""
             return (f"mis ({mode}{self.heuristic}, {self.light_samples} light + {self.bsdf_samples} bsdf"
                     f"{selection})")
+        if self.name == "ris":
+            mix = f", {self.heuristic}" if self.bsdf_samples else ""
+            sources = f"{self.light_samples} light + {self.bsdf_samples} bsdf" if self.bsdf_samples \
+                else str(self.light_samples)
+            return f"ris ({sources} candidates{mix}{selection})"
         count = self.light_count or self.direction_count
         parts = ([f"x{count}"] if count != 1 else []) + ([selection[2:]] if selection else [])
         return f"{self.name} ({', '.join(parts)})" if parts else self.name
@@ -105,10 +135,15 @@ class Strategy:
                 parts.append(f"l{self.light_samples}_b{self.bsdf_samples}")
             if self.one_sample:
                 parts.append("one-sample")
+        elif self.name == "ris":
+            parts.append(f"l{self.light_samples}_b{self.bsdf_samples}" if self.bsdf_samples
+                         else f"m{self.light_samples}")
+            if self.bsdf_samples and self.heuristic != "power":
+                parts.append(self.heuristic)
         elif (self.light_count or self.direction_count) != 1:
             parts.append(f"x{self.light_count or self.direction_count}")
-        if self.light_count and self.light_selection == "uniform":
-            parts.append("uniform-lights")
+        if self.light_count and self.light_selection != "power":
+            parts.append(f"{self.light_selection}-lights")
         if self.light_count and self.light_sampling != DEFAULT_LIGHT_SAMPLING:
             parts.append(self.light_sampling)
         return "_".join(parts)
@@ -116,7 +151,7 @@ class Strategy:
     @property
     def light_count(self) -> int:
         """Light samples per camera sample that this strategy takes (0 if it takes none)."""
-        return self.light_samples if self.name in ("light", "mis") else 0
+        return self.light_samples if self.name in ("light", "mis", "ris") else 0
 
     @property
     def direction_count(self) -> int:
@@ -131,7 +166,7 @@ class Strategy:
     @property
     def recorded_heuristic(self) -> str:
         """The heuristic as records and reports state it: ``none`` unless the strategy is mis."""
-        return self.heuristic if self.name == "mis" else "none"
+        return self.heuristic if self.name == "mis" or (self.name == "ris" and self.bsdf_samples) else "none"
 
     @property
     def recorded_light_sampling(self) -> str:
@@ -141,9 +176,11 @@ class Strategy:
     @property
     def one_sample_mis(self) -> bool:
         """Each shading point takes one technique, chosen at random (both counts > 0)."""
-        return self.one_sample and self.light_count > 0 and self.direction_count > 0
+        return self.one_sample and self.name != "ris" and self.light_count > 0 and self.direction_count > 0
 
     @property
     def samples_per_lane(self) -> int:
         """Shading rays one camera sample casts at most (light plus direction samples)."""
+        if self.name == "ris":  # candidates cast no shadow rays: one for the kept one, one per BSDF candidate
+            return 1 + self.direction_count
         return 1 if self.one_sample_mis else self.light_count + self.direction_count

@@ -1,15 +1,21 @@
 """Light techniques behind one interface: choose an emitter, sample it from the shading point.
 
 A light sample is two decisions: which emitter candidate (``selection.py``: by power or
-uniformly, Walker's alias table) and a direction toward it by that candidate's **technique**,
-which may depend on the shading point x and its normal n. Every candidate has a technique code
+uniformly, Walker's alias table; or by a light BVH, ``bvh.py``, in proportion to an importance
+bound at the shading point) and a direction toward it by that candidate's **technique**, which
+may depend on the shading point x and its normal n. Every candidate has a technique code
 and a row of named columns in one float32 table; the interface, dispatched on the code, is
 
-- :func:`sample` ``(x, n, u) -> (wi, dist, le, pdf, delta)``: the selection probability is
-  multiplied into ``pdf`` here, where MIS needs it (pdf in solid angle; for a delta light,
-  the selection probability alone);
-- :func:`pdf` ``(x, n, hit, wi, dist)``: the pdf with which :func:`sample` would produce the
-  direction ``wi`` from ``x`` that hits the emitting primitive ``hit`` at distance ``dist``.
+- :func:`sample` ``(x, n, n_receiver, u) -> (wi, dist, le, pdf, delta)``: the selection
+  probability is multiplied into ``pdf`` here, where MIS needs it (pdf in solid angle; for a
+  delta light, the selection probability alone);
+- :func:`pdf` ``(x, n, n_receiver, hit, wi, dist)``: the pdf with which :func:`sample` would
+  produce the direction ``wi`` from ``x`` that hits the emitting primitive ``hit`` at distance
+  ``dist``.
+
+``n`` is the geometric normal toward the viewer (the techniques' cosine warp uses it);
+``n_receiver`` the shading normal, above which the materials reflect, so that the BVH's
+selection may skip lights below it (0: no such bound).
 
 Which technique a candidate gets is the render's **light sampling** (``LIGHT_SAMPLINGS``):
 
@@ -51,7 +57,7 @@ import numpy as np
 
 from ..jit import jit
 from ..strategy import LIGHT_SAMPLINGS
-from . import point, rectangle, selection, sphere, triangle_area, triangle_solid_angle
+from . import bvh, point, rectangle, selection, sphere, triangle_area, triangle_solid_angle
 from .bounds import emitter_spheres, may_reach
 
 TECHNIQUES = ("triangle_area", "point", "sphere_area", "sphere_cone", "spherical_triangle",
@@ -59,7 +65,7 @@ TECHNIQUES = ("triangle_area", "point", "sphere_area", "sphere_cone", "spherical
 (TRIANGLE_AREA, POINT, SPHERE_AREA, SPHERE_CONE, SPHERICAL_TRIANGLE, SPHERICAL_TRIANGLE_COS,
  SPHERICAL_RECTANGLE, SPHERICAL_RECTANGLE_COS) = range(len(TECHNIQUES))
 ROW_WIDTH = max(triangle_area.WIDTH, point.WIDTH, sphere.WIDTH, rectangle.WIDTH)
-SELECTIONS = ("power", "uniform")
+SELECTIONS = ("power", "uniform", "bvh")
 # Smallest emitting triangle the light table takes: 1 / area must be finite in float32.
 MIN_LIGHT_AREA = float(np.finfo(np.float32).tiny)
 # A quad is sampled as a rectangle when its edges are perpendicular to this relative precision
@@ -71,7 +77,10 @@ class LightTables(NamedTuple):
     """What the per-lane light functions read, for K emitter candidates.
 
     alias_prob : (K,) float64 and alias : (K,) int64, Walker's table of the selection pmf.
-    pmf : (K,) float64 selection probability of each candidate.
+    pmf : (K,) float64 selection probability of each candidate (``bvh``: by power; the BVH's
+        own pmf depends on the shading point).
+    nodes, child, trail, trail_depth : the light BVH (``bvh.LightTree``); no nodes unless the
+        selection is ``bvh``.
     technique : (K,) int8 technique code of each candidate (``TECHNIQUES``).
     rows : (K, ROW_WIDTH) float32, each candidate's parameters in its technique's columns.
         float32 as the scene holds vertices and emission; a row is one 64-byte cache line,
@@ -86,6 +95,10 @@ class LightTables(NamedTuple):
     alias_prob: np.ndarray
     alias: np.ndarray
     pmf: np.ndarray
+    nodes: np.ndarray
+    child: np.ndarray
+    trail: np.ndarray
+    trail_depth: np.ndarray
     technique: np.ndarray
     rows: np.ndarray
     candidate_of_prim: np.ndarray
@@ -93,10 +106,32 @@ class LightTables(NamedTuple):
 
 
 @jit
-def sample(alias_prob, alias, pmf, technique, rows, x, n, u_select: float, u0: float, u1: float):
-    """A light sample for shading point ``x`` with normal ``n`` (world), from the arrays of
-    ``LightTables`` (kernels pass them one by one: reading an array out of a tuple inside a
-    compiled loop costs a reference-count update). Returns ``(wi, dist, le, pdf, delta)``:
+def choose(alias_prob, alias, pmf, nodes, child, x, n_receiver, u_select: float):
+    """The candidate to sample and its selection probability ``(k, pmf_k)``; ``(-1, 0.0)`` if none
+    can light ``x``."""
+    if len(nodes) > 0:
+        return bvh.choose(nodes, child, x, n_receiver, u_select)
+    if len(alias) == 0:
+        return -1, 0.0
+    k = selection.pick(alias_prob, alias, u_select)
+    return k, pmf[k]
+
+
+@jit
+def selection_pmf(pmf, nodes, child, trail, trail_depth, k: int, x, n_receiver) -> float:
+    """The probability that :func:`choose` returns candidate ``k`` at ``x``."""
+    if len(nodes) > 0:
+        return bvh.pmf_of(nodes, child, trail, trail_depth, k, x, n_receiver)
+    return pmf[k]
+
+
+@jit
+def sample(alias_prob, alias, pmf, nodes, child, technique, rows, x, n, n_receiver,
+           u_select: float, u0: float, u1: float):
+    """A light sample for shading point ``x`` with normals ``n`` (geometric) and ``n_receiver``
+    (shading; module docstring), from the arrays of ``LightTables`` (kernels pass them one by
+    one: reading an array out of a tuple inside a compiled loop costs a reference-count update).
+    Returns ``(wi, dist, le, pdf, delta)``:
 
     wi : world unit direction from x toward the light.   dist : distance to the sampled point.
     le : RGB radiance arriving along wi (area), or I / d^2 (point); the contribution is
@@ -105,13 +140,13 @@ def sample(alias_prob, alias, pmf, technique, rows, x, n, u_select: float, u0: f
         selection probability alone. 0 where invalid.
     delta : a delta light (no other technique can produce this sample).
     """
-    if len(alias) == 0:
+    k, pmf_k = choose(alias_prob, alias, pmf, nodes, child, x, n_receiver, u_select)
+    if k < 0:
         return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, False
-    k = selection.pick(alias_prob, alias, u_select)
     code = technique[k]
     if code == POINT:
         wi, dist, le = point.sample(rows, k, x)
-        return wi, dist, le, (pmf[k] if dist > 0.0 else 0.0), True
+        return wi, dist, le, (pmf_k if dist > 0.0 else 0.0), True
     if code == TRIANGLE_AREA:
         wi, dist, le, p = triangle_area.sample(rows, k, x, u0, u1)
     elif code == SPHERE_AREA:
@@ -124,14 +159,15 @@ def sample(alias_prob, alias, pmf, technique, rows, x, n, u_select: float, u0: f
         wi, dist, le, p = rectangle.sample(rows, k, x, n, code == SPHERICAL_RECTANGLE_COS, u0, u1)
     else:
         return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, False
-    return wi, dist, le, pmf[k] * p, False
+    return wi, dist, le, pmf_k * p, False
 
 
 @jit
-def pdf(pmf, technique, rows, candidate_of_prim, x, n, prim: int, wi, dist: float) -> float:
+def pdf(pmf, nodes, child, trail, trail_depth, technique, rows, candidate_of_prim, x, n, n_receiver,
+        prim: int, wi, dist: float) -> float:
     """Solid-angle pdf with which :func:`sample` picks the direction ``wi`` (world) from ``x``
-    with normal ``n`` that hits scene primitive ``prim`` at distance ``dist``; 0 for
-    non-emitters and back sides."""
+    with normals ``n``, ``n_receiver`` that hits scene primitive ``prim`` at distance ``dist``;
+    0 for non-emitters and back sides."""
     k = candidate_of_prim[prim]
     if k < 0:
         return 0.0
@@ -148,7 +184,9 @@ def pdf(pmf, technique, rows, candidate_of_prim, x, n, prim: int, wi, dist: floa
         p = rectangle.pdf(rows, k, x, n, code == SPHERICAL_RECTANGLE_COS, wi, dist)
     else:
         return 0.0
-    return pmf[k] * p
+    if not p > 0.0:
+        return 0.0
+    return selection_pmf(pmf, nodes, child, trail, trail_depth, k, x, n_receiver) * p
 
 
 def _rectangles(scene, tri: np.ndarray) -> tuple[list[int], np.ndarray]:
@@ -209,7 +247,7 @@ def build_tables(scene, light_selection: str = "power",
                            np.pi * sphere_area * scene.sphere_emission[sph].mean(axis=1), point_flux[points]])
     owner = np.concatenate([scene.shape_of_triangle[tri_alone], np.array(quads, dtype=np.int64),
                             scene.shape_of_sphere[sph], -1 - points]).astype(np.int64)
-    weight = selection.weights(light_selection, flux, owner,
+    weight = selection.weights("power" if light_selection == "bvh" else light_selection, flux, owner,
                                np.concatenate([scene.area[tri_alone], quad_area, sphere_area,
                                                np.ones(len(points))]))
     count = len(weight)
@@ -245,7 +283,24 @@ def build_tables(scene, light_selection: str = "power",
     # two triangles bound it exactly).
     spheres = emitter_spheres(scene.vertices[scene.faces[tri]], scene.shape_of_triangle[tri],
                               scene.ray_epsilon, scene.spheres[sph], scene.shape_of_sphere[sph])
-    tables = LightTables(alias_prob, alias, pmf, technique, np.ascontiguousarray(rows),
+    tree = bvh.empty()
+    if light_selection == "bvh":
+        quad_corners = frames[:, :1] + np.array([0.0, 1.0, 1.0, 0.0])[:, None] * frames[:, 1:2] \
+            + np.array([0.0, 0.0, 1.0, 1.0])[:, None] * frames[:, 2:3]
+        lo = np.concatenate([corners.min(axis=1), quad_corners.min(axis=1),
+                             scene.spheres[sph, :3] - scene.spheres[sph, 3:], scene.point_position[points]])
+        hi = np.concatenate([corners.max(axis=1), quad_corners.max(axis=1),
+                             scene.spheres[sph, :3] + scene.spheres[sph, 3:], scene.point_position[points]])
+        # Triangles and rectangles shine over the front hemisphere of one normal (cone of
+        # spread 0); spheres and points in every direction (spread pi). theta_e = 90 deg for all.
+        axis = np.zeros((count, 3))
+        axis[:, 2] = 1.0
+        axis[:first_quad] = scene.normal[tri_alone]
+        axis[first_quad:first_sphere] = scene.normal[[scene.shapes[q].first for q in quads]].reshape(-1, 3)
+        cos_o = np.where(np.arange(count) < first_sphere, 1.0, -1.0)
+        tree = bvh.build(lo, hi, axis, cos_o, np.zeros(count), flux)
+    tables = LightTables(alias_prob, alias, pmf, np.ascontiguousarray(tree.nodes), tree.child, tree.trail,
+                         tree.trail_depth, technique, np.ascontiguousarray(rows),
                          candidate_of_prim, spheres)
     return tables, owner
 
@@ -286,47 +341,90 @@ class LightSampler:
         self.count = len(self.pmf)
 
     def sample(self, u_select: np.ndarray, u_point: np.ndarray, x: np.ndarray,
-               n: np.ndarray | None = None) -> LightSample:
+               n: np.ndarray | None = None, n_receiver: np.ndarray | None = None) -> LightSample:
         """Sample a light for shading points ``x (n, 3)`` with unit normals ``n (n, 3)`` (used by
-        ``solid-angle-cos``; default +z); ``u_select (n,)``, ``u_point (n, 2)``."""
-        normal = np.broadcast_to([0.0, 0.0, 1.0], x.shape) if n is None else n
-        return LightSample(*_sample_lanes(self.tables, u_select, u_point, x, normal))
+        ``solid-angle-cos``; default +z) and ``n_receiver`` (used by ``bvh``; default ``n``);
+        ``u_select (n,)``, ``u_point (n, 2)``."""
+        normal, receiver = self._normals(x, n, n_receiver)
+        return LightSample(*_sample_lanes(self.tables, u_select, u_point, x, normal, receiver))
 
     def pdf(self, x: np.ndarray, prim: np.ndarray, wi: np.ndarray, dist: np.ndarray,
-            n: np.ndarray | None = None) -> np.ndarray:
+            n: np.ndarray | None = None, n_receiver: np.ndarray | None = None) -> np.ndarray:
         """Solid-angle pdf with which :meth:`sample` would pick, from ``x (n, 3)`` with normals
-        ``n`` (default +z), the direction ``wi (n, 3)`` that hits primitive ``prim (n,)`` at
-        distance ``dist (n,)``; 0 for non-emitters and back sides."""
+        ``n`` and ``n_receiver`` (as there), the direction ``wi (n, 3)`` that hits primitive
+        ``prim (n,)`` at distance ``dist (n,)``; 0 for non-emitters and back sides."""
+        normal, receiver = self._normals(x, n, n_receiver)
+        return _pdf_lanes(self.tables, x, normal, receiver, prim, wi, dist)
+
+    def choose(self, u_select: np.ndarray, x: np.ndarray, n_receiver: np.ndarray | None = None):
+        """The selection alone: ``(candidate (n,) int64, pmf (n,))`` for ``u_select (n,)`` at
+        points ``x (n, 3)`` with shading normals ``n_receiver`` (default +z); candidate -1 and
+        pmf 0 where no light can reach the point."""
+        _, receiver = self._normals(x, None, n_receiver)
+        return _choose_lanes(self.tables, u_select, x, receiver)
+
+    def selection_pmf(self, k: np.ndarray, x: np.ndarray, n_receiver: np.ndarray | None = None) -> np.ndarray:
+        """``(n,)`` the probability that :meth:`choose` picks candidate ``k[i]`` at ``x[i]``."""
+        _, receiver = self._normals(x, None, n_receiver)
+        return _selection_pmf_lanes(self.tables, np.asarray(k, dtype=np.int64), x, receiver)
+
+    @staticmethod
+    def _normals(x, n, n_receiver):
         normal = np.broadcast_to([0.0, 0.0, 1.0], x.shape) if n is None else n
-        return _pdf_lanes(self.tables, x, normal, prim, wi, dist)
+        return normal, normal if n_receiver is None else n_receiver
 
 
 @jit
-def _sample_lanes(tables, u_select, u_point, x, normal):
+def _sample_lanes(tables, u_select, u_point, x, normal, receiver):
     alias_prob, alias, pmf = tables.alias_prob, tables.alias, tables.pmf
+    nodes, child = tables.nodes, tables.child
     technique, rows = tables.technique, tables.rows
     n = len(u_select)
     wi, dist, le = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
     p, delta = np.empty(n), np.empty(n, dtype=np.bool_)
     for i in range(n):
-        xi = (x[i, 0], x[i, 1], x[i, 2])
-        ni = (normal[i, 0], normal[i, 1], normal[i, 2])
-        w, dist[i], radiance, p[i], delta[i] = sample(alias_prob, alias, pmf, technique, rows, xi, ni,
-                                                      u_select[i], u_point[i, 0], u_point[i, 1])
+        w, dist[i], radiance, p[i], delta[i] = sample(
+            alias_prob, alias, pmf, nodes, child, technique, rows,
+            (x[i, 0], x[i, 1], x[i, 2]), (normal[i, 0], normal[i, 1], normal[i, 2]),
+            (receiver[i, 0], receiver[i, 1], receiver[i, 2]), u_select[i], u_point[i, 0], u_point[i, 1])
         wi[i, 0], wi[i, 1], wi[i, 2] = w
         le[i, 0], le[i, 1], le[i, 2] = radiance
     return wi, dist, le, p, delta
 
 
 @jit
-def _pdf_lanes(tables, x, normal, prim, wi, dist):
-    pmf, technique, rows, candidate_of_prim = tables.pmf, tables.technique, tables.rows, \
-        tables.candidate_of_prim
+def _pdf_lanes(tables, x, normal, receiver, prim, wi, dist):
+    pmf, nodes, child, trail, trail_depth = (tables.pmf, tables.nodes, tables.child, tables.trail,
+                                             tables.trail_depth)
+    technique, rows, candidate_of_prim = tables.technique, tables.rows, tables.candidate_of_prim
     out = np.empty(len(prim))
     for i in range(len(prim)):
-        out[i] = pdf(pmf, technique, rows, candidate_of_prim, (x[i, 0], x[i, 1], x[i, 2]),
-                     (normal[i, 0], normal[i, 1], normal[i, 2]), prim[i], (wi[i, 0], wi[i, 1], wi[i, 2]),
-                     dist[i])
+        out[i] = pdf(pmf, nodes, child, trail, trail_depth, technique, rows, candidate_of_prim,
+                     (x[i, 0], x[i, 1], x[i, 2]), (normal[i, 0], normal[i, 1], normal[i, 2]),
+                     (receiver[i, 0], receiver[i, 1], receiver[i, 2]), prim[i],
+                     (wi[i, 0], wi[i, 1], wi[i, 2]), dist[i])
+    return out
+
+
+@jit
+def _choose_lanes(tables, u_select, x, receiver):
+    alias_prob, alias, pmf = tables.alias_prob, tables.alias, tables.pmf
+    nodes, child = tables.nodes, tables.child
+    k, p = np.empty(len(u_select), dtype=np.int64), np.empty(len(u_select))
+    for i in range(len(u_select)):
+        k[i], p[i] = choose(alias_prob, alias, pmf, nodes, child, (x[i, 0], x[i, 1], x[i, 2]),
+                            (receiver[i, 0], receiver[i, 1], receiver[i, 2]), u_select[i])
+    return k, p
+
+
+@jit
+def _selection_pmf_lanes(tables, k, x, receiver):
+    pmf, nodes, child, trail, trail_depth = (tables.pmf, tables.nodes, tables.child, tables.trail,
+                                             tables.trail_depth)
+    out = np.empty(len(k))
+    for i in range(len(k)):
+        out[i] = selection_pmf(pmf, nodes, child, trail, trail_depth, k[i], (x[i, 0], x[i, 1], x[i, 2]),
+                               (receiver[i, 0], receiver[i, 1], receiver[i, 2]))
     return out
 
 

@@ -4,10 +4,12 @@
   for an emitting triangle and 4 pi * mean(I) for a point light, so bright lights get more
   samples;
 - ``uniform``: each light (an emissive shape or a point light) equally likely, then a triangle
-  of that shape in proportion to its area.
+  of that shape in proportion to its area;
+- ``bvh``: by a light BVH, in proportion to each candidate's importance at the shading point
+  (``bvh.py``); its pmf depends on the point.
 
-Candidates are drawn with Walker's alias method (O(1) per sample). The selection probability
-is multiplied into the light pdf by ``tracer.lights``, where MIS needs it.
+``power`` and ``uniform`` draw candidates with Walker's alias method (O(1) per sample). The
+selection probability is multiplied into the light pdf by ``tracer.lights``, where MIS needs it.
 """
 
 from __future__ import annotations
@@ -34,24 +36,37 @@ def weights(selection: str, flux: np.ndarray, light: np.ndarray, area: np.ndarra
 
 def alias_table(pmf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Walker's alias table for ``pmf (K,)`` by Vose's stable construction (Vose 1991): column k
-    keeps itself with probability prob[k] and otherwise gives its alias."""
+    keeps itself with probability prob[k] and otherwise gives its alias. Compiled: O(K) with
+    no interpreter steps per candidate (100,000 emitters take milliseconds)."""
+    return _vose(np.ascontiguousarray(pmf, dtype=np.float64))
+
+
+@jit
+def _vose(pmf):
     k = len(pmf)
     prob = np.ones(k)
     alias = np.arange(k)
-    if k == 0:
-        return prob, alias
     scaled = pmf * k
-    small = [i for i in range(k) if scaled[i] < 1.0]
-    large = [i for i in range(k) if scaled[i] >= 1.0]
-    while small and large:
-        s, g = small.pop(), large.pop()
+    # Two stacks of column indices, filled in index order and popped from the end: row 0 the
+    # columns below 1 ("small"), row 1 the rest; height[r] the count in stack r.
+    stacks = np.empty((2, k), dtype=np.int64)
+    height = np.zeros(2, dtype=np.int64)
+    for i in range(k):
+        _push(stacks, height, 0 if scaled[i] < 1.0 else 1, i)
+    while height[0] > 0 and height[1] > 0:
+        height -= 1
+        s, g = stacks[0, height[0]], stacks[1, height[1]]
         prob[s], alias[s] = scaled[s], g
         scaled[g] -= 1.0 - scaled[s]
-        (small if scaled[g] < 1.0 else large).append(g)
-    # What remains is 1 up to rounding: keep those columns whole.
-    for i in small + large:
-        prob[i] = 1.0
+        _push(stacks, height, 0 if scaled[g] < 1.0 else 1, g)
+    # What remains is 1 up to rounding: keep those columns whole (prob starts at 1).
     return prob, alias
+
+
+@jit
+def _push(stacks, height, which: int, column: int) -> None:
+    stacks[which, height[which]] = column
+    height[which] += 1
 
 
 @jit

@@ -86,7 +86,14 @@ from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
 from ..render_loop import RenderSettings, render_complete
 from ..sampler_choice import DEFAULT_SAMPLER, SAMPLERS, replicates_of
 from ..scene import Scene, default_scene_path, load_scene
-from ..strategy import DEFAULT_LIGHT_SAMPLING, HEURISTICS, LIGHT_SAMPLINGS, STRATEGIES, Strategy
+from ..strategy import (
+    DEFAULT_LIGHT_SAMPLING,
+    HEURISTICS,
+    LIGHT_SAMPLINGS,
+    LIGHT_SELECTIONS,
+    STRATEGIES,
+    Strategy,
+)
 from . import metrics, statistics
 from .compare import scene_for_reference
 from .statistics import FAMILY_ALPHA
@@ -120,6 +127,7 @@ class Entry:
     light_samples: int = 1
     bsdf_samples: int = 1
     light_sampling: str = DEFAULT_LIGHT_SAMPLING
+    light_selection: str = "power"
     sampler: str = DEFAULT_SAMPLER
     downsample: int = 4
     pixel_test: bool = True
@@ -136,23 +144,26 @@ class Entry:
         label = self.strategy if self.strategy != "mis" else f"mis-{self.heuristic}"
         if self.light_sampling != DEFAULT_LIGHT_SAMPLING:
             label += f"-{self.light_sampling}"
+        if self.light_selection != "power":
+            label += f"-{self.light_selection}-lights"
         if self.sampler != DEFAULT_SAMPLER:
             label += f"-{self.sampler}"
         return f"{self.scene}/{label}"
 
     def strategy_object(self) -> Strategy:
         return Strategy(self.strategy, self.heuristic, self.light_samples, self.bsdf_samples,
-                        light_sampling=self.light_sampling)
+                        light_sampling=self.light_sampling, light_selection=self.light_selection)
 
     def reference_key(self) -> str:
         """The reference file, relative to the baseline's folder."""
         return self.reference or f"references/{self.scene}.exr"
 
     def to_json(self) -> dict[str, Any]:
-        # The default light sampling and sampler are left out, so that baselines of tracer 0.2
-        # stay as they were.
+        # The default light sampling, selection and sampler are left out, so that baselines of
+        # tracer 0.2 stay as they were.
         return {k: v for k, v in self.__dict__.items() if v is not None and v != ""
                 and not (k == "light_sampling" and v == DEFAULT_LIGHT_SAMPLING)
+                and not (k == "light_selection" and v == "power")
                 and not (k == "sampler" and v == DEFAULT_SAMPLER)}
 
 
@@ -293,6 +304,8 @@ def _field_problem(name: str, value: Any, raw: dict[str, Any]) -> str | None:
         return None if value in HEURISTICS else f"one of {', '.join(HEURISTICS)}"
     if name == "light_sampling":
         return None if value in LIGHT_SAMPLINGS else f"one of {', '.join(LIGHT_SAMPLINGS)}"
+    if name == "light_selection":
+        return None if value in LIGHT_SELECTIONS else f"one of {', '.join(LIGHT_SELECTIONS)}"
     if name == "sampler":
         return None if value in SAMPLERS else f"one of {', '.join(SAMPLERS)}"
     if name == "spp":

@@ -140,14 +140,20 @@ EXTRAPOLATION_LIMIT = 4.0
 
 def method_name(strategy: Strategy, sampler: str = DEFAULT_SAMPLER) -> str:
     """A file-name-safe label of a strategy and sampler: ``mis``, ``mis_l3_b1``, ``light_x4``,
-    ``light_solid-angle``, ``mis_sobol`` ... (the defaults are left out)."""
+    ``light_solid-angle``, ``mis_bvh-lights``, ``ris_m16``, ``mis_sobol`` ... (the defaults are
+    left out)."""
     count = strategy.light_count or strategy.direction_count
     if strategy.name == "mis" and (strategy.light_samples, strategy.bsdf_samples) != (1, 1):
         name = f"mis_l{strategy.light_samples}_b{strategy.bsdf_samples}"
+    elif strategy.name == "ris":
+        name = f"ris_l{strategy.light_samples}_b{strategy.bsdf_samples}" if strategy.bsdf_samples \
+            else f"ris_m{strategy.light_samples}"
     else:
         name = strategy.name if count == 1 else f"{strategy.name}_x{count}"
     if strategy.light_count and strategy.light_sampling != DEFAULT_LIGHT_SAMPLING:
         name += f"_{strategy.light_sampling}"
+    if strategy.light_count and strategy.light_selection != "power":
+        name += f"_{strategy.light_selection}-lights"
     if sampler != DEFAULT_SAMPLER:
         name += f"_{sampler}"
     return name
@@ -583,7 +589,9 @@ def run_row(run: Run) -> dict[str, object]:
     row: dict[str, object] = {"strategy": run.strategy.name, "heuristic": run.strategy.recorded_heuristic,
                               "light_samples": run.strategy.light_count,
                               "bsdf_samples": run.strategy.direction_count,
-                              "light_sampling": run.strategy.recorded_light_sampling, "sampler": run.sampler,
+                              "light_sampling": run.strategy.recorded_light_sampling,
+                              "light_selection": run.strategy.light_selection if run.strategy.light_count
+                              else "none", "sampler": run.sampler,
                               "spp": run.spp, "seconds": run.seconds, "clock": run.clock,
                               "wall_seconds": run.wall_seconds, "cpu_seconds": run.cpu_seconds}
     row.update(run.measures)

@@ -1,0 +1,190 @@
+"""Light selection by a light BVH, the compiled alias table, and ris on many lights.
+
+The unbiasedness of every selection and of ris against closed forms is in test_estimators (the
+polygon lights and the furnace) and on the shipped scenes in test_scenes; here: that the BVH
+draws candidates with exactly the pmf it reports, that its pmf is 0 only where a light cannot
+contribute, that the tree bounds what it claims to, and the many-light scenes themselves.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from tracer.lights import LightSampler, bvh, selection
+from tracer.scene import load_scene
+
+from stats import sidak
+
+
+def _random_unit(rng, n: int) -> np.ndarray:
+    v = rng.normal(size=(n, 3))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def many_light_scene(seed: int = 3) -> dict:
+    """A floor under 300 small quads of random size, orientation, power and colour (some facing
+    away from everything), 4 sphere lights and 3 point lights, spread over 20 x 6 x 20."""
+    rng = np.random.default_rng(seed)
+    shapes = [{"type": "quad", "origin": [-10.0, 0.0, -10.0], "edge1": [0.0, 0.0, 20.0],
+               "edge2": [20.0, 0.0, 0.0], "material": "floor"}]
+    for _ in range(300):
+        normal = _random_unit(rng, 1)[0]
+        e1 = np.cross(normal, [0.3, 0.5, 0.8])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(normal, e1)  # e1 x e2 = normal
+        size = rng.uniform(0.05, 0.6)
+        shapes.append({"type": "quad", "origin": [float(rng.uniform(-10, 10)), float(rng.uniform(0.2, 6.0)),
+                                                  float(rng.uniform(-10, 10))],
+                       "edge1": (e1 * size).tolist(), "edge2": (e2 * size).tolist(),
+                       "emission": (rng.uniform(0.1, 1.0, 3) * 10.0 ** rng.uniform(-1, 2)).tolist()})
+    for _ in range(4):
+        shapes.append({"type": "sphere", "center": [float(rng.uniform(-8, 8)), float(rng.uniform(1, 5)),
+                                                    float(rng.uniform(-8, 8))],
+                       "radius": float(rng.uniform(0.05, 0.4)), "emission": [3.0, 2.0, 1.0]})
+    lights = [{"type": "point", "position": [float(rng.uniform(-8, 8)), float(rng.uniform(1, 5)),
+                                             float(rng.uniform(-8, 8))], "intensity": [5.0, 5.0, 5.0]}
+              for _ in range(3)]
+    return {"camera": {"origin": [0.0, 8.0, 15.0], "target": [0.0, 0.0, 0.0], "fov": 50.0,
+                       "width": 8, "height": 8},
+            "materials": {"floor": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+            "shapes": shapes, "lights": lights}
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene(many_light_scene())
+
+
+def shading_points(rng, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Random points in the lights' region and random unit normals."""
+    x = np.column_stack([rng.uniform(-10, 10, count), rng.uniform(0.0, 6.0, count),
+                         rng.uniform(-10, 10, count)])
+    return x, _random_unit(rng, count)
+
+
+def test_bvh_draws_candidates_with_the_pmf_it_reports(scene):
+    """At 8 random shading points, 40,000 draws of the BVH's selection against its own pmf
+    function (``selection_pmf`` of every candidate; the rest of the mass, 1 - sum, is "no light":
+    the descent stops where both children's bounds are 0, which only lights that cannot
+    contribute lose): a chi-square goodness-of-fit test per point, categories with fewer than 5
+    expected draws pooled, Sidak over the points. The pmf a draw returns must equal the pmf
+    function's value for that candidate bit for bit: MIS weighs BSDF samples with the latter,
+    so any difference would bias it."""
+    sampler = LightSampler(scene, "bvh")
+    rng = np.random.default_rng(11)
+    points, normals = shading_points(rng, 8)
+    draws = 40_000
+    level = sidak(len(points))
+    everyone = np.arange(sampler.count)
+    for x, n in zip(points, normals, strict=True):
+        xs, ns = np.tile(x, (draws, 1)), np.tile(n, (draws, 1))
+        k, pmf = sampler.choose(rng.random(draws), xs, ns)
+        chosen = k >= 0
+        assert np.array_equal(pmf[chosen], sampler.selection_pmf(k[chosen], xs[chosen], ns[chosen]))
+        assert np.all(pmf[~chosen] == 0.0)
+        expected = sampler.selection_pmf(everyone, np.tile(x, (sampler.count, 1)),
+                                         np.tile(n, (sampler.count, 1)))
+        assert 0.0 < expected.sum() <= 1.0 + 1e-12
+        expected = np.append(expected, max(1.0 - expected.sum(), 0.0))  # the last: no light
+        observed = np.bincount(np.where(chosen, k, sampler.count), minlength=sampler.count + 1).astype(float)
+        assert observed[expected == 0.0].sum() == 0, "a candidate of pmf 0 was drawn"
+        big = expected * draws >= 5.0
+        obs = np.append(observed[big], observed[~big].sum())
+        exp = np.append(expected[big], expected[~big].sum()) * draws
+        if exp[-1] == 0.0:
+            obs, exp = obs[:-1], exp[:-1]
+        chi2 = float(np.sum((obs - exp) ** 2 / exp))
+        p = stats.chi2.sf(chi2, len(exp) - 1)
+        assert p > level, f"point {x}: chi2 {chi2:.1f} on {len(exp) - 1} dof, p = {p:.2g}"
+
+
+def test_bvh_pmf_is_zero_only_where_a_light_cannot_contribute(scene):
+    """Light samples drawn by power selection (which can pick any light) at 2,000 random shading
+    points: wherever one contributes (radiance > 0 arriving above the point's horizon), the BVH
+    must give its candidate a positive pmf at that point, or the BVH estimator would miss that
+    light there (a biased image). The bounds are conservative, so this must hold for every sample."""
+    power, tree = LightSampler(scene, "power"), LightSampler(scene, "bvh")
+    rng = np.random.default_rng(5)
+    x, n = shading_points(rng, 2_000)
+    x, n = np.repeat(x, 50, axis=0), np.repeat(n, 50, axis=0)
+    u_select, u_point = rng.random(len(x)), rng.random((len(x), 2))
+    k, _ = power.choose(u_select, x, n)
+    sample = power.sample(u_select, u_point, x, n, n)
+    contributes = (sample.pdf > 0) & (sample.radiance.max(axis=1) > 0) & (np.sum(sample.wi * n, axis=1) > 0)
+    assert contributes.sum() > 10_000
+    pmf = tree.selection_pmf(k[contributes], x[contributes], n[contributes])
+    assert np.all(pmf > 0.0)
+    # And the BVH does use its bounds: a good share of (point, light) pairs are skipped.
+    assert np.mean(tree.selection_pmf(k, x, n) == 0.0) > 0.2
+
+
+def test_tree_bounds_what_it_claims_for_100k_emitters():
+    """A tree over 100,000 random candidates: every node's box holds its children's, its power
+    is their sum, leaves map to candidates one to one, and each candidate's trail leads to its
+    leaf through nodes whose normal cones hold its own (each node bounds its members directly,
+    so a child's cone need not lie in its parent's)."""
+    rng = np.random.default_rng(1)
+    count = 100_000
+    lo = rng.uniform(-50, 50, (count, 3))
+    hi = lo + rng.uniform(0, 0.5, (count, 3))
+    axis = _random_unit(rng, count)
+    cos_o = np.where(rng.random(count) < 0.1, -1.0, 1.0)
+    tree = bvh.build(lo, hi, axis, cos_o, np.zeros(count), rng.uniform(0.1, 10, count))
+    nodes, child = tree.nodes, tree.child
+    assert len(nodes) == 2 * count - 1
+    leaves = child < 0
+    assert np.array_equal(np.sort(-1 - child[leaves]), np.arange(count))
+    assert tree.trail_depth.max() <= bvh.TRAIL_BITS + 1
+    parent = np.flatnonzero(~leaves)
+    for side in (0, 1):
+        kid = child[parent] + side
+        assert np.all(nodes[parent, bvh.LO:bvh.LO + 3] <= nodes[kid, bvh.LO:bvh.LO + 3])
+        assert np.all(nodes[parent, bvh.HI:bvh.HI + 3] >= nodes[kid, bvh.HI:bvh.HI + 3])
+    total = nodes[child[parent], bvh.POWER] + nodes[child[parent] + 1, bvh.POWER]
+    np.testing.assert_allclose(nodes[parent, bvh.POWER], total, rtol=1e-12)
+    # Each leaf's trail leads from the root to it, through nodes whose normal cones hold its
+    # cone: angle(axes) + its spread <= the node's spread.
+    for k in rng.integers(0, count, 300):
+        node, path = 0, [0]
+        for level in range(tree.trail_depth[k]):
+            node = child[node] + ((tree.trail[k] >> level) & 1)
+            path.append(node)
+        assert child[node] == -1 - k
+        a, b = nodes[path, bvh.AXIS:bvh.AXIS + 3], axis[k]
+        between = 2.0 * np.arctan2(np.linalg.norm(a - b, axis=1), np.linalg.norm(a + b, axis=1))
+        spread = np.minimum(np.arccos(cos_o[k]) + between, np.pi)
+        assert np.all(spread <= np.arccos(np.clip(nodes[path, bvh.COS_O], -1, 1)) + 1e-9)
+
+
+def test_alias_table_reproduces_the_pmf():
+    """Walker's table from the compiled Vose construction: the probability of each column
+    (kept itself, or given as an alias) equals the pmf to rounding, also for zeros and ties."""
+    rng = np.random.default_rng(4)
+    for pmf in (rng.random(1000) ** 4, np.array([0.0, 1.0, 0.0]), np.ones(7), rng.random(1)):
+        pmf = pmf / pmf.sum()
+        prob, alias = selection.alias_table(pmf)
+        k = len(pmf)
+        rebuilt = prob / k + np.bincount(alias, weights=(1.0 - prob) / k, minlength=k)
+        np.testing.assert_allclose(rebuilt, pmf, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["many_lights", "emissive_mesh"])
+def test_many_light_scenes_have_what_they_promise(name):
+    """many_lights: at least 1,000 emitters of widely varying power, with occluders;
+    emissive_mesh: at least 10,000 emitting triangles."""
+    from pathlib import Path
+
+    scene = load_scene(Path(__file__).resolve().parent.parent / "tracer" / "scenes" / f"{name}.toml")
+    emitting = scene.emission.max(axis=1) > 0
+    sampler = LightSampler(scene, "bvh")
+    if name == "many_lights":
+        shapes = {scene.shape_of_triangle[i] for i in np.flatnonzero(emitting)}
+        assert len(shapes) >= 1000
+        power = sampler.pmf
+        assert power.max() / power.min() > 100
+        assert (~emitting).sum() > 100  # buildings and kiosks: occluders
+    else:
+        assert emitting.sum() >= 10_000
+    assert sampler.tables.trail_depth.max() >= 10
