@@ -25,16 +25,27 @@ from stats import image_mean_and_se, sidak
 
 SCENES = Path(__file__).resolve().parent.parent / "tracer" / "scenes"
 
-# scene -> (strategies compared with MIS, spp)
+BVH = "bvh"
+# ris with light candidates picked by the BVH, and with BSDF candidates (which find their
+# emitter by a ray against the emitters alone): on the scenes with occluders, a point light, a
+# mirror (delta BSDF candidates) and a glossy plate.
+RIS_LIGHT = Strategy.ris(4, light_selection=BVH)
+RIS_MIXED = Strategy.ris(4, "light+bsdf")
+
+# scene -> (strategies compared with MIS, spp); a name stands for Strategy(name).
 AGREE = {
-    "cornell": (["uniform", "cosine", "bsdf", "light"], 32),
-    "veach_mis": (["bsdf", "light"], 64),
+    "cornell": (["uniform", "cosine", "bsdf", "light", Strategy("mis", light_selection=BVH), RIS_MIXED], 32),
+    "veach_mis": (["bsdf", "light", Strategy("mis", light_selection=BVH), RIS_MIXED], 64),
     "tiny_light": (["light"], 32),
-    "point_light": (["light"], 32),
+    "point_light": (["light", RIS_LIGHT, RIS_MIXED], 32),
     # Uniform and cosine sampling of the alpha = 0.03 plate under the big light are unbiased but
     # so heavy-tailed that their 32-spp means sit several "standard errors" low most of the time.
     "big_light": (["bsdf", "light"], 64),
-    "near_mirror": (["bsdf"], 32),
+    "near_mirror": (["bsdf", RIS_MIXED], 32),
+    # Power selection of the street's lights is unbiased but wastes most samples on floodlights
+    # that face away; light sampling by BVH and ris carry the comparison there.
+    "many_lights": ([Strategy("light", light_selection=BVH), RIS_LIGHT, RIS_MIXED], 16),
+    "emissive_mesh": (["bsdf", Strategy("mis", light_selection=BVH), RIS_LIGHT], 16),
 }
 COMPARISONS = sum(len(v[0]) for v in AGREE.values()) * 3
 SIZE = 32
@@ -63,11 +74,12 @@ def test_strategies_agree_with_mis(name, mis_films):
     assert np.all(ref_mean > 0.0)
     level = sidak(COMPARISONS)
     for i, strategy in enumerate(strategies):
-        film = render(scene, Strategy(strategy), RenderSettings(spp=spp, seed=2000 + i)).film
+        strategy = Strategy(strategy) if isinstance(strategy, str) else strategy
+        film = render(scene, strategy, RenderSettings(spp=spp, seed=2000 + i)).film
         mean, se = image_mean_and_se(film)
         z = (mean - ref_mean) / np.sqrt(se**2 + ref_se**2)
         p = 2.0 * sps.norm.sf(np.abs(z))
-        assert np.all(p > level), f"{name}/{strategy}: mean {mean} vs mis {ref_mean}, z = {z}"
+        assert np.all(p > level), f"{name}/{strategy.label}: mean {mean} vs mis {ref_mean}, z = {z}"
 
 
 def test_point_light_is_invisible_to_direction_sampling():

@@ -40,11 +40,15 @@ from ..strategy import STRATEGIES, Strategy
 from . import metrics, statistics
 
 # The suite's columns: every strategy, then light and MIS with each solid-angle light sampling
-# (``tracer.lights``), as (column, strategy, light sampling).
-COLUMNS = tuple((name, name, "area") for name in STRATEGIES) + tuple(
-    (f"{name}_{sampling}", name, sampling) for name in ("light", "mis")
-    for sampling in ("solid-angle", "solid-angle-cos"))
-COLUMN_NAMES = tuple(column for column, _, _ in COLUMNS)
+# (``tracer.lights``), then light, MIS and ris with lights picked by a light BVH, as (column,
+# strategy, light sampling, light selection).
+COLUMNS = tuple((name, name, "area", "power") for name in STRATEGIES) + tuple(
+    (f"{name}_{sampling}", name, sampling, "power") for name in ("light", "mis")
+    for sampling in ("solid-angle", "solid-angle-cos")) + tuple(
+    (f"{name}_bvh", name, "area", "bvh") for name in ("light", "mis", "ris"))
+COLUMN_NAMES = tuple(column for column, _, _, _ in COLUMNS)
+# ris takes this many times the case's light and BSDF samples as candidates (4 + 4 by default).
+RIS_CANDIDATE_FACTOR = 4
 SIZE = 32
 SPP = 64
 REFERENCE_SPP = 1024
@@ -78,9 +82,11 @@ class Case:
     def path(self) -> Path:
         return CASE_DIR / f"{self.scene or self.name}.toml"
 
-    def strategy(self, name: str, heuristic: str = "power", light_sampling: str = "area") -> Strategy:
-        return Strategy(name, heuristic, self.light_samples, self.bsdf_samples,
-                        light_sampling=light_sampling)
+    def strategy(self, name: str, heuristic: str = "power", light_sampling: str = "area",
+                 light_selection: str = "power") -> Strategy:
+        factor = RIS_CANDIDATE_FACTOR if name == "ris" else 1
+        return Strategy(name, heuristic, factor * self.light_samples, factor * self.bsdf_samples,
+                        light_sampling=light_sampling, light_selection=light_selection)
 
 
 def cases(size: int = SIZE) -> list[Case]:
@@ -115,6 +121,11 @@ def cases(size: int = SIZE) -> list[Case]:
              testable=("mis",)),
         Case("roughplastic_small_light", "rough plastic (Beckmann 0.02): BSDF sampling misses the light",
              testable=("mis",)),
+        Case("bright_light_behind_wall", "power selection wastes its samples on a light facing away",
+             testable=("bsdf", "mis", "ris")),
+        Case("dim_light_near", "power selection rarely picks the near, dim light", testable=("mis", "ris")),
+        Case("occluded_bright_light", "RIS's unshadowed target ranks a hidden light first",
+             testable=("bsdf", "cosine", "mis")),
     ]
     for scale in ("0.001", "1000"):
         out.append(Case(f"scaled_{scale}", f"a small quad light, every length x {scale}"))
@@ -172,9 +183,10 @@ def run_case(
         scene, Strategy("mis"), RenderSettings(spp=reference_spp, seed=seed + 1_000_000, threads=threads)
     ).film
     cells = []
-    for column, name, sampling in COLUMNS:
+    for column, name, sampling, selection in COLUMNS:
         settings = RenderSettings(spp=spp, seed=seed, threads=threads, sampler=sampler)
-        result = render_complete(scene, case.strategy(name, light_sampling=sampling), settings)
+        strategy = case.strategy(name, light_sampling=sampling, light_selection=selection)
+        result = render_complete(scene, strategy, settings)
         film = result.film
         cells.append(
             Cell(
