@@ -122,9 +122,8 @@ def test_bvh_pmf_is_zero_only_where_a_light_cannot_contribute(scene):
 
 def test_tree_bounds_what_it_claims_for_100k_emitters():
     """A tree over 100,000 random candidates: every node's box holds its children's, its power
-    is their sum, leaves map to candidates one to one, and each candidate's trail leads to its
-    leaf through nodes whose normal cones hold its own (each node bounds its members directly,
-    so a child's cone need not lie in its parent's)."""
+    is their sum and its normal cone holds theirs, leaves map to candidates one to one, and
+    each candidate's trail leads to its leaf through nodes whose cones hold its own."""
     rng = np.random.default_rng(1)
     count = 100_000
     lo = rng.uniform(-50, 50, (count, 3))
@@ -144,6 +143,12 @@ def test_tree_bounds_what_it_claims_for_100k_emitters():
         assert np.all(nodes[parent, bvh.HI:bvh.HI + 3] >= nodes[kid, bvh.HI:bvh.HI + 3])
     total = nodes[child[parent], bvh.POWER] + nodes[child[parent] + 1, bvh.POWER]
     np.testing.assert_allclose(nodes[parent, bvh.POWER], total, rtol=1e-12)
+    for side in (0, 1):  # a child's cone lies in its parent's
+        kid = child[parent] + side
+        a, b = nodes[parent, bvh.AXIS:bvh.AXIS + 3], nodes[kid, bvh.AXIS:bvh.AXIS + 3]
+        between = 2.0 * np.arctan2(np.linalg.norm(a - b, axis=1), np.linalg.norm(a + b, axis=1))
+        spread = np.minimum(np.arccos(np.clip(nodes[kid, bvh.COS_O], -1, 1)) + between, np.pi)
+        assert np.all(spread <= np.arccos(np.clip(nodes[parent, bvh.COS_O], -1, 1)) + 1e-7)
     # Each leaf's trail leads from the root to it, through nodes whose normal cones hold its
     # cone: angle(axes) + its spread <= the node's spread.
     for k in rng.integers(0, count, 300):

@@ -14,7 +14,8 @@ render(scene, strategy="mis", spp=64, seed=0, **options) -> Image
 read_image(path) -> Image
 compare(image, reference, seconds=None) -> dict of mse, relmse, variance, efficiency
 Strategy(name, heuristic, light_samples, bsdf_samples, one_sample, light_selection, light_sampling)
-STRATEGIES, LIGHT_SAMPLINGS : the strategy and light-sampling names.
+Strategy.ris(candidates, sources, **fields) -> the ris strategy
+STRATEGIES, LIGHT_SAMPLINGS, LIGHT_SELECTIONS : the strategy, light-sampling and selection names.
 
 The renderer core is the rest of this package (scene, materials, lights, samplers,
 estimators, render_loop, film, imagefiles); the study tools (compare, check, stability, primer)
@@ -33,8 +34,8 @@ except PackageNotFoundError:  # running from a source tree that was not installe
     __version__ = "0.0.0+source"
 
 _API = {"Image": "api", "Scene": "scene", "Strategy": "strategy", "STRATEGIES": "strategy",
-        "LIGHT_SAMPLINGS": "strategy", "compare": "api", "load_scene": "scene", "read_image": "api",
-        "render": "api", "InputError": "errors"}
+        "LIGHT_SAMPLINGS": "strategy", "LIGHT_SELECTIONS": "strategy", "compare": "api",
+        "load_scene": "scene", "read_image": "api", "render": "api", "InputError": "errors"}
 __all__ = sorted(_API)
 
 

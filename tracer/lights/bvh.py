@@ -30,20 +30,28 @@ transmits would need the receiver bound switched off (n = 0 turns it off).
 
 **Build.** Top down by pbrt-v4's surface area orientation heuristic (SAOH; Conty Estevez and
 Kulla, sec. 4.3): a node's members are split where the cost Kr (phi_L M_Omega(L) M_A(L) +
-phi_R M_Omega(R) M_A(R)) is least, over 12 bins of their centres along each axis, with M_A a
-box's surface area, M_Omega the solid angle its normal cone and emission spread sweep, and Kr
-the node's longest extent over its extent along the split axis (which keeps thin boxes from
-being cut lengthwise). A first version sorted lights by Morton code into a balanced tree:
-built faster, but at shading points of the many-light street its selection variance (the sum
-over lights of share^2 / pmf) was 10 times the flat importance's, against 1.0-1.5 times for this
-build. Compiled; no loop over lights runs in the interpreter (100,000 emitters build in well
-under a second: ``benchmarks/many_lights.py``). Leaves hold one candidate. Each node's children
-are stored side by side (``child[i]``, ``child[i] + 1``); a leaf's path from the root is its
-*trail*, one bit per level (1: the second child), as in pbrt-v4, which the pmf walk follows.
+phi_R M_Omega(R) M_A(R)) is least, over up to 12 bins of their centres along each axis, with
+M_A a box's surface area, M_Omega the solid angle its normal cone and emission spread sweep,
+and Kr the node's longest extent over its extent along the split axis (which keeps thin boxes
+from being cut lengthwise). The cost sees each group's normal cone as an estimate (its mean
+axis and spread, from a sum of axes: no trigonometry per light); the nodes' bounds themselves
+are exact unions, made bottom up once the tree stands. Nodes of up to four lights split at the
+median. Compiled; no loop over lights runs in the interpreter: 100,000 emitters build in about
+half a second (``benchmarks/many_lights.py``). Leaves hold one candidate; each node's children
+are stored side by side (``child[i]``, ``child[i] + 1``), and a leaf's path from the root is
+its *trail*, one bit per level (1: the second child), as in pbrt-v4, which the pmf walk
+follows.
+
+What the tree buys, measured at three shading points of the ``many_lights`` street as the sum
+over lights of share^2 / pmf (share: the light's part of the point's unshadowed light; 1 is a
+pmf proportional to it): power selection 32-88, this tree 1.5-4.0, the flat importance of
+every light (no tree; O(K) per sample) 1.05-3.6. A first version, a balanced tree over the
+lights' Morton order (Lin and Yuksel 2020), built faster but scored 7.9-11.3.
 
 Node layout, one float64 row of ``NODE_WIDTH``: box min (3), box max (3), cone axis (3), cos
 theta_o, cos theta_e, power, and what the importance reads of the box, precomputed: its bounding
-sphere's centre (3), squared radius and radius, and sin theta_o.
+sphere's centre (3), squared radius and radius, and sin theta_o; then theta_o and theta_e
+themselves, which the build's cone unions and costs work with (no arccos per merge).
 """
 
 from __future__ import annotations
@@ -55,8 +63,9 @@ import numpy as np
 
 from ..jit import jit, jit_called
 
-NODE_WIDTH = 18
-LO, HI, AXIS, COS_O, COS_E, POWER, CENTRE, RADIUS2, RADIUS, SIN_O = 0, 3, 6, 9, 10, 11, 12, 15, 16, 17
+NODE_WIDTH = 20
+LO, HI, AXIS, COS_O, COS_E, POWER, CENTRE, RADIUS2, RADIUS, SIN_O, THETA_O, THETA_E = (
+    0, 3, 6, 9, 10, 11, 12, 15, 16, 17, 18, 19)
 # Boxes grow by this relative amount (of their size and position), so that points sampled on an
 # emitter in float64 never fall outside its node's box by a rounding error.
 BOX_PAD = 1e-9
@@ -104,8 +113,13 @@ def build(lo: np.ndarray, hi: np.ndarray, axis: np.ndarray, cos_o: np.ndarray, c
     leaves[:, AXIS:AXIS + 3] = axis
     leaves[:, COS_O] = cos_o
     leaves[:, COS_E] = cos_e
+    leaves[:, THETA_O] = np.arccos(np.clip(cos_o, -1.0, 1.0))
+    leaves[:, THETA_E] = np.arccos(np.clip(cos_e, -1.0, 1.0))
     leaves[:, POWER] = power
     nodes, child, trail, trail_depth = _build(leaves)
+    # Internal nodes' cone cosines from their angles (a leaf keeps the cosine it was given).
+    inner = child >= 0
+    nodes[inner, COS_O] = np.cos(nodes[inner, THETA_O])
     half = 0.5 * (nodes[:, HI:HI + 3] - nodes[:, LO:LO + 3])
     nodes[:, CENTRE:CENTRE + 3] = nodes[:, LO:LO + 3] + half
     nodes[:, RADIUS2] = np.sum(half * half, axis=1)
@@ -115,6 +129,8 @@ def build(lo: np.ndarray, hi: np.ndarray, axis: np.ndarray, cos_o: np.ndarray, c
 
 
 BINS = 12
+# Nodes of at most this many members are split at their median (module docstring).
+SMALL_NODE = 4
 # Below this many levels left in a 64-bit trail, nodes are split at their median, which ends
 # within log2(members) levels.
 TRAIL_BITS = 62
@@ -135,20 +151,25 @@ def _build(leaves):
     stack = np.zeros((2 * count, 5), dtype=np.int64)
     stack[0, 2] = count
     top, used = 1, 1
-    bins = np.zeros((3, BINS, NODE_WIDTH))
+    bins = np.zeros((3, BINS, SUMMARY_WIDTH))
+    scratch = np.zeros((BINS + 2, SUMMARY_WIDTH))  # _split's suffix rows and left row
+    bounds = np.zeros((4, 3))  # _split's centre and box extremes
     while top > 0:
         top -= 1
         node, first, end = stack[top, 0], stack[top, 1], stack[top, 2]
         depth, path = stack[top, 3], stack[top, 4]
-        _gather_bounds(leaves, order, first, end, nodes[node])
         if end - first == 1:
             k = order[first]
+            nodes[node, :] = leaves[k]
             child[node] = -1 - k
             trail[k] = path
             trail_depth[k] = depth
             continue
-        middle = _split(leaves, centre, order, first, end, nodes[node], bins,
-                        depth + math.ceil(math.log2(end - first)) >= TRAIL_BITS)
+        # Two members: nothing to choose. Up to SMALL_NODE: the median, as the SAOH's 36 cone
+        # unions per node would cost most of the build there (most nodes are small) for little.
+        median = end - first <= SMALL_NODE or depth + math.ceil(math.log2(end - first)) >= TRAIL_BITS
+        middle = first + 1 if end - first == 2 else _split(leaves, centre, order, first, end, bins, scratch,
+                                                               bounds, median)
         child[node] = used
         for side in range(2):
             stack[top + side, 0] = used + side
@@ -158,16 +179,13 @@ def _build(leaves):
             stack[top + side, 4] = path | (side << depth)
         top += 2
         used += 2
+    # Bounds bottom up: children come after their parent, so in reverse order every child is
+    # done before its parent (one union per node; each node's bounds hold its children's).
+    for node in range(len(nodes) - 1, -1, -1):
+        if child[node] >= 0:
+            nodes[node, :] = nodes[child[node]]
+            _merge(nodes[node], nodes[child[node] + 1])
     return nodes, child, trail, trail_depth
-
-
-@jit
-def _gather_bounds(leaves, order, first: int, end: int, out) -> None:
-    """``out`` (a node row) := the union of the rows ``leaves[order[first:end]]``."""
-    for c in range(NODE_WIDTH):
-        out[c] = leaves[order[first], c]
-    for m in range(first + 1, end):
-        _merge(out, leaves[order[m]])
 
 
 @jit
@@ -177,7 +195,8 @@ def _merge(into, row) -> None:
         into[LO + a] = min(into[LO + a], row[LO + a])
         into[HI + a] = max(into[HI + a], row[HI + a])
     into[POWER] += row[POWER]
-    into[COS_E] = min(into[COS_E], row[COS_E])
+    into[COS_E] = min(into[COS_E], row[COS_E])  # exact, for the importance
+    into[THETA_E] = max(into[THETA_E], row[THETA_E])  # the same spread, for the costs
     _cone_union(into, row)
 
 
@@ -186,11 +205,10 @@ def _cone_union(into, row) -> None:
     """``into``'s normal cone := the smallest cone holding it and ``row``'s, as pbrt-v4's
     ``Union(DirectionCone, DirectionCone)`` constructs it: if one holds the other, that one; else
     the cone spanning both, its axis turned from a's toward b's in their plane; widened by
-    CONE_PAD against rounding."""
+    CONE_PAD against rounding. Works on the THETA_O column (COS_O is set after the build)."""
     wa = (into[AXIS], into[AXIS + 1], into[AXIS + 2])
     wb = (row[AXIS], row[AXIS + 1], row[AXIS + 2])
-    theta_a = math.acos(min(max(into[COS_O], -1.0), 1.0))
-    theta_b = math.acos(min(max(row[COS_O], -1.0), 1.0))
+    theta_a, theta_b = into[THETA_O], row[THETA_O]
     # The angle between the axes, accurate for nearly equal ones too.
     dx, dy, dz = wa[0] - wb[0], wa[1] - wb[1], wa[2] - wb[2]
     sx, sy, sz = wa[0] + wb[0], wa[1] + wb[1], wa[2] + wb[2]
@@ -200,13 +218,13 @@ def _cone_union(into, row) -> None:
     if min(theta_d + theta_a, math.pi) <= theta_b:
         for a in range(3):
             into[AXIS + a] = wb[a]
-        into[COS_O] = row[COS_O]
+        into[THETA_O] = theta_b
         return
     theta_o = 0.5 * (theta_a + theta_d + theta_b)
     kx, ky, kz = wa[1] * wb[2] - wa[2] * wb[1], wa[2] * wb[0] - wa[0] * wb[2], wa[0] * wb[1] - wa[1] * wb[0]
     length = math.sqrt(kx * kx + ky * ky + kz * kz)
     if theta_o >= math.pi or length == 0.0:
-        into[COS_O] = -1.0  # every direction
+        into[THETA_O] = math.pi  # every direction
         return
     # Rodrigues' rotation of wa by theta_o - theta_a about k = (wa x wb) / |wa x wb| (k is
     # perpendicular to wa, so wa cos + (k x wa) sin).
@@ -218,69 +236,125 @@ def _cone_union(into, row) -> None:
     rz = wa[2] * c + (kx * wa[1] - ky * wa[0]) * s
     norm = math.sqrt(rx * rx + ry * ry + rz * rz)
     into[AXIS], into[AXIS + 1], into[AXIS + 2] = rx / norm, ry / norm, rz / norm
-    into[COS_O] = math.cos(min(theta_o + CONE_PAD, math.pi))
+    into[THETA_O] = min(theta_o + CONE_PAD, math.pi)
+
+
+# The split search summarizes a group of members in one row of SUMMARY_WIDTH: box min (3), box
+# max (3), the sum of their cone axes (3), their count, power, largest theta_o and theta_e.
+# Its normal cone is estimated, not bounded: axis along the sum, spread acos(|sum| / count)
+# (exact for two equal halves of a symmetric pair) plus the largest member spread. The cost
+# only steers where nodes split; the nodes' own bounds are exact unions (bottom up in _build).
+SUMMARY_WIDTH = 13
+S_LO, S_HI, S_AXES, S_COUNT, S_POWER, S_THETA_O, S_THETA_E = 0, 3, 6, 9, 10, 11, 12
 
 
 @jit
-def _orientation_measure(cos_o: float, cos_e: float) -> float:
+def _summarize(into, leaf) -> None:
+    """Add a candidate row ``leaf`` to the summary row ``into`` (empty: count 0)."""
+    if into[S_COUNT] == 0.0:
+        for a in range(3):
+            into[S_LO + a] = leaf[LO + a]
+            into[S_HI + a] = leaf[HI + a]
+            into[S_AXES + a] = leaf[AXIS + a]
+        into[S_COUNT], into[S_POWER] = 1.0, leaf[POWER]
+        into[S_THETA_O], into[S_THETA_E] = leaf[THETA_O], leaf[THETA_E]
+        return
+    for a in range(3):
+        into[S_LO + a] = min(into[S_LO + a], leaf[LO + a])
+        into[S_HI + a] = max(into[S_HI + a], leaf[HI + a])
+        into[S_AXES + a] += leaf[AXIS + a]
+    into[S_COUNT] += 1.0
+    into[S_POWER] += leaf[POWER]
+    into[S_THETA_O] = max(into[S_THETA_O], leaf[THETA_O])
+    into[S_THETA_E] = max(into[S_THETA_E], leaf[THETA_E])
+
+
+@jit
+def _combine(into, other) -> None:
+    """Summary ``into`` := ``into`` and ``other`` together."""
+    if other[S_COUNT] == 0.0:
+        return
+    if into[S_COUNT] == 0.0:
+        into[:] = other
+        return
+    for a in range(3):
+        into[S_LO + a] = min(into[S_LO + a], other[S_LO + a])
+        into[S_HI + a] = max(into[S_HI + a], other[S_HI + a])
+        into[S_AXES + a] += other[S_AXES + a]
+    into[S_COUNT] += other[S_COUNT]
+    into[S_POWER] += other[S_POWER]
+    into[S_THETA_O] = max(into[S_THETA_O], other[S_THETA_O])
+    into[S_THETA_E] = max(into[S_THETA_E], other[S_THETA_E])
+
+
+@jit
+def _orientation_measure(theta_o: float, theta_e: float) -> float:
     """M_Omega: the solid angle (times pi) that a normal cone of spread theta_o emitting over
     theta_e around each normal sweeps (Conty Estevez and Kulla, eq. 1; pbrt-v4's
     ``EvaluateCost``)."""
-    theta_o = math.acos(min(max(cos_o, -1.0), 1.0))
-    theta_e = math.acos(min(max(cos_e, -1.0), 1.0))
     theta_w = min(theta_o + theta_e, math.pi)
-    sin_o = math.sqrt(max(1.0 - cos_o * cos_o, 0.0))
+    cos_o, sin_o = math.cos(theta_o), math.sin(theta_o)
     return 2.0 * math.pi * (1.0 - cos_o) + 0.5 * math.pi * (
         2.0 * theta_w * sin_o - math.cos(theta_o - 2.0 * theta_w) - 2.0 * theta_o * sin_o + cos_o)
 
 
 @jit
-def _cost(row) -> float:
-    """phi M_Omega M_A of a node row (0 for an empty bin)."""
-    if not row[POWER] > 0.0:
+def _cost(summary) -> float:
+    """phi M_Omega M_A of a summary row (0 when empty)."""
+    if summary[S_COUNT] == 0.0:
         return 0.0
-    ex, ey, ez = row[HI] - row[LO], row[HI + 1] - row[LO + 1], row[HI + 2] - row[LO + 2]
+    ex, ey, ez = (summary[S_HI] - summary[S_LO], summary[S_HI + 1] - summary[S_LO + 1],
+                  summary[S_HI + 2] - summary[S_LO + 2])
     area = 2.0 * (ex * ey + ey * ez + ez * ex)
-    return row[POWER] * _orientation_measure(row[COS_O], row[COS_E]) * area
+    length = math.sqrt(summary[S_AXES] ** 2 + summary[S_AXES + 1] ** 2 + summary[S_AXES + 2] ** 2)
+    spread = min(math.acos(min(length / summary[S_COUNT], 1.0)) + summary[S_THETA_O], math.pi)
+    return summary[S_POWER] * _orientation_measure(spread, summary[S_THETA_E]) * area
 
 
 @jit
-def _split(leaves, centre, order, first: int, end: int, bounds, bins, median: bool) -> int:
+def _split(leaves, centre, order, first: int, end: int, bins, scratch, bounds, median: bool) -> int:
     """Reorder ``order[first:end]`` into two groups and return where the second starts: by the
-    cheapest SAOH split over BINS bins of the members' centres along each axis, or at the
+    cheapest SAOH split over up to BINS bins of the members' centres along each axis, or at the
     median along the widest axis of the centres (``median``, or when no split separates them).
-    ``bins`` (3, BINS, NODE_WIDTH) is scratch space."""
-    lo_c = np.full(3, np.inf)
-    hi_c = np.full(3, -np.inf)
+    ``bins`` (3, BINS, SUMMARY_WIDTH), ``scratch`` (BINS + 2, SUMMARY_WIDTH) and ``bounds``
+    (4, 3) are work space, allocated once per build."""
+    lo_c, hi_c, lo_b, hi_b = bounds[0], bounds[1], bounds[2], bounds[3]  # centres' and boxes' extremes
+    lo_c[:] = np.inf
+    lo_b[:] = np.inf
+    hi_c[:] = -np.inf
+    hi_b[:] = -np.inf
     for m in range(first, end):
+        k = order[m]
         for a in range(3):
-            lo_c[a] = min(lo_c[a], centre[order[m], a])
-            hi_c[a] = max(hi_c[a], centre[order[m], a])
-    extent = max(bounds[HI] - bounds[LO], bounds[HI + 1] - bounds[LO + 1], bounds[HI + 2] - bounds[LO + 2])
+            lo_c[a] = min(lo_c[a], centre[k, a])
+            hi_c[a] = max(hi_c[a], centre[k, a])
+            lo_b[a] = min(lo_b[a], leaves[k, LO + a])
+            hi_b[a] = max(hi_b[a], leaves[k, HI + a])
+    extent = max(hi_b[0] - lo_b[0], hi_b[1] - lo_b[1], hi_b[2] - lo_b[2])
     best, best_axis, best_bin = np.inf, -1, -1
+    count = min(BINS, end - first)  # bins: as many as members, up to BINS (more gain a small node nothing)
     if not median:
-        for a in range(3):
-            bins[a, :, POWER] = 0.0
+        bins[:, :count, S_COUNT] = 0.0
         for m in range(first, end):  # each member into its bin along each axis
+            k = order[m]
             for a in range(3):
                 span = hi_c[a] - lo_c[a]
                 if span > 0.0:
-                    b = min(int(BINS * (centre[order[m], a] - lo_c[a]) / span), BINS - 1)
-                    _add(bins[a, b], leaves[order[m]])
-        suffix = np.zeros((BINS + 1, NODE_WIDTH))  # suffix[c]: bins c .. BINS - 1 together
-        left = np.zeros(NODE_WIDTH)
+                    b = min(int(count * (centre[k, a] - lo_c[a]) / span), count - 1)
+                    _summarize(bins[a, b], leaves[k])
+        suffix, left = scratch[:count + 1], scratch[BINS + 1]  # suffix[c]: bins c .. count - 1 together
         for a in range(3):
             if not hi_c[a] - lo_c[a] > 0.0:
                 continue
-            suffix[BINS, POWER] = 0.0
-            for c in range(BINS - 1, -1, -1):
+            suffix[count, S_COUNT] = 0.0
+            for c in range(count - 1, -1, -1):
                 suffix[c, :] = suffix[c + 1]
-                _add(suffix[c], bins[a, c])
-            regularize = extent / max(bounds[HI + a] - bounds[LO + a], 1e-300)
-            left[POWER] = 0.0
-            for cut in range(1, BINS):
-                _add(left, bins[a, cut - 1])
-                if not (left[POWER] > 0.0 and suffix[cut, POWER] > 0.0):
+                _combine(suffix[c], bins[a, c])
+            regularize = extent / max(hi_b[a] - lo_b[a], 1e-300)
+            left[S_COUNT] = 0.0
+            for cut in range(1, count):
+                _combine(left, bins[a, cut - 1])
+                if left[S_COUNT] == 0.0 or suffix[cut, S_COUNT] == 0.0:
                     continue
                 cost = regularize * (_cost(left) + _cost(suffix[cut]))
                 if cost < best:
@@ -295,24 +369,13 @@ def _split(leaves, centre, order, first: int, end: int, bounds, bins, median: bo
     span = hi_c[best_axis] - lo_c[best_axis]
     i, j = first, end - 1
     while i <= j:  # partition: the members of the bins below the cut first
-        b = min(int(BINS * (centre[order[i], best_axis] - lo_c[best_axis]) / span), BINS - 1)
+        b = min(int(count * (centre[order[i], best_axis] - lo_c[best_axis]) / span), count - 1)
         if b < best_bin:
             i += 1
         else:
             order[i], order[j] = order[j], order[i]
             j -= 1
     return i
-
-
-@jit
-def _add(into, row) -> None:
-    """``into`` := ``into`` and ``row`` together (an empty ``into``, power 0, becomes ``row``)."""
-    if not row[POWER] > 0.0:
-        return
-    if into[POWER] > 0.0:
-        _merge(into, row)
-    else:
-        into[:] = row
 
 
 # -------------------------------------------------------------------------------------------------
