@@ -13,7 +13,7 @@ import pytest
 from test_cli import DARK
 
 from tracer import render_loop
-from tracer.cli import main
+from tracer.cli import build_parser, main
 from tracer.errors import InputError
 from tracer.film import Film, merge_renders
 from tracer.imagefiles import read_exr, write_exr
@@ -654,17 +654,20 @@ def test_compare_takes_light_selections_and_ris_settings(tmp_path):
     out = tmp_path / "cmp"
     assert main(["compare", scene, "--reference", str(ref), "--spp", "2", "--out", str(out), "--quiet",
                  "--strategies", "bsdf,mis,ris", "--light-selection", "power,bvh", "--ris-candidates", "2,4",
-                 "--ris-sources", "light,light+bsdf"]) == 0
+                 "--ris-sources", "light+bsdf"]) == 0
     rows = {r["name"]: r for r in json.loads((out / "metrics.json").read_text())["results"]}
-    ris = {f"ris_{counts}{selection}" for counts in ("m2", "m4", "l1_b1", "l2_b2")
-           for selection in ("", "_bvh-lights")}
+    ris = {f"ris_{counts}{selection}" for counts in ("l1_b1", "l2_b2") for selection in ("", "_bvh-lights")}
     assert set(rows) == {"bsdf", "mis", "mis_bvh-lights"} | ris
     assert rows["ris_l2_b2_bvh-lights"]["light_selection"] == "bvh"
     assert (rows["ris_l2_b2"]["light_samples"], rows["ris_l2_b2"]["bsdf_samples"]) == (2, 2)
     assert rows["bsdf"]["light_selection"] == "none"
-    record = read_exr(out / "ris_m4_bvh-lights.exr").record
+    record = read_exr(out / "ris_l2_b2_bvh-lights.exr").record
     assert (record.strategy, record.light_selection, record.light_samples, record.bsdf_samples) == \
-        ("ris", "bvh", 4, 0)
+        ("ris", "bvh", 2, 2)
+    # Both sources in one list: every source with every count (names from Strategy.ris).
+    args = build_parser().parse_args(["compare", scene, "--reference", str(ref), "--spp", "1",
+                                      "--ris-sources", "light,light+bsdf", "--ris-candidates", "2,4"])
+    assert (args.ris_sources, args.ris_candidates) == (["light", "light+bsdf"], [2, 4])
     assert main(["compare", scene, "--reference", str(ref), "--spp", "2", "--out", str(out), "--quiet",
                  "--strategies", "ris", "--ris-sources", "light+bsdf", "--ris-candidates", "1"]) == 2
 

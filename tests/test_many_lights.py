@@ -193,3 +193,19 @@ def test_many_light_scenes_have_what_they_promise(name):
     else:
         assert emitting.sum() >= 10_000
     assert sampler.tables.trail_depth.max() >= 10
+
+
+def test_api_renders_ris_and_bvh_and_records_them():
+    """``tracer.render(scene, "ris", ris_candidates=, ris_sources=, light_selection=)`` runs the
+    strategy it names and the image's record says so; a bad source is a ValueError."""
+    import tracer
+
+    scene = load_scene(many_light_scene(), width=8, height=8)
+    image = tracer.render(scene, "ris", spp=2, ris_candidates=6, ris_sources="light+bsdf",
+                          light_selection="bvh")
+    record = image.film.record
+    assert (record.strategy, record.light_samples, record.bsdf_samples, record.light_selection) == \
+        ("ris", 3, 3, "bvh")
+    assert np.all(np.isfinite(image.mean))
+    with pytest.raises(ValueError, match="ris sources"):
+        tracer.render(scene, "ris", spp=1, ris_sources="bsdf")

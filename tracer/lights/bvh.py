@@ -165,8 +165,8 @@ def _build(leaves):
             trail[k] = path
             trail_depth[k] = depth
             continue
-        # Two members: nothing to choose. Up to SMALL_NODE: the median, as the SAOH's 36 cone
-        # unions per node would cost most of the build there (most nodes are small) for little.
+        # Two members: nothing to choose. Up to SMALL_NODE: the median, which is all that three
+        # or four lights need (and most nodes are that small, so the SAOH would cost most there).
         median = end - first <= SMALL_NODE or depth + math.ceil(math.log2(end - first)) >= TRAIL_BITS
         middle = first + 1 if end - first == 2 else _split(leaves, centre, order, first, end, bins, scratch,
                                                                bounds, median)
