@@ -311,6 +311,7 @@ def test_interrupt_writes_what_was_rendered(tmp_path, signum):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.exr", "r.png", "s.toml"]
 
 
+@pytest.mark.slow  # one whole compilation of the kernels in a child process: 92 s of the 14-minute CI run
 def test_interrupt_while_compiling_leaves_files_alone(tmp_path):
     """Ctrl-C during the first compilation (an empty kernel cache, so compiling takes seconds):
     the render stops once the kernels are compiled (an interrupt inside numba's compiler would
