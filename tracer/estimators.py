@@ -76,7 +76,6 @@ from .samplers import dimensions
 from .scene import Scene
 from .strategy import Strategy
 
-ONE_BELOW = 1.0 - 2.0 ** -53  # the largest float64 below 1: a rescaled uniform stays in [0, 1)
 # Codes of the direction techniques for compiled code.
 NO_DIRECTIONS, UNIFORM, COSINE, BSDF = 0, 1, 2, 3
 DIRECTION_CODE = {None: NO_DIRECTIONS, "uniform": UNIFORM, "cosine": COSINE, "bsdf": BSDF}
@@ -507,16 +506,14 @@ def _offer(origins, dirs, tmaxs, values, weight_sum, u_left, radiance, lane: int
     total = weight_sum[lane] + w
     weight_sum[lane] = total
     keep = w / total
-    u = u_left[lane]
-    if u < keep:
-        u_left[lane] = min(u / keep, ONE_BELOW)
+    took = u_left[lane] < keep
+    u_left[lane] = samplers.reuse(u_left[lane], keep, took)
+    if took:
         for c in range(3):
             origins[lane, c] = origin[c]
             dirs[lane, c] = direction[c]
             values[lane, c] = value[c]
         tmaxs[lane] = tmax
-    else:
-        u_left[lane] = min((u - keep) / (1.0 - keep), ONE_BELOW)
 
 
 @jit

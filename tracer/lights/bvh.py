@@ -62,6 +62,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..jit import jit, jit_called
+from ..samplers import reuse
 
 NODE_WIDTH = 20
 LO, HI, AXIS, COS_O, COS_E, POWER, CENTRE, RADIUS2, RADIUS, SIN_O, THETA_O, THETA_E = (
@@ -73,7 +74,6 @@ BOX_PAD = 1e-9
 CONE_PAD = 1e-7
 # Importance is capped here, so that a point on top of a point light does not make inf / inf.
 MAX_IMPORTANCE = 1e300
-ONE_BELOW = 1.0 - 2.0 ** -53
 
 
 class LightTree(NamedTuple):
@@ -440,14 +440,14 @@ def choose(nodes, child, x, n, u: float):
         if not total > 0.0:
             return -1, 0.0
         p_first = i0 / total
-        if u < p_first:
+        took = u < p_first
+        u = reuse(u, p_first, took)
+        if took:
             node = first
             prob *= p_first
-            u = min(u / p_first, ONE_BELOW)
         else:
             node = first + 1
             prob *= i1 / total
-            u = min((u - p_first) / (1.0 - p_first), ONE_BELOW)
     return -1 - child[node], prob
 
 

@@ -81,6 +81,20 @@ def make(name: str, seed: int, first_sample: int = 0, spp: int = 1) -> SamplerPa
     return SamplerParams(SAMPLERS.index(name), seed_key(seed), replicates, int(first_sample), nx, ny)
 
 
+ONE_BELOW = 1.0 - 2.0 ** -53  # the largest float64 below 1
+
+
+@jit
+def reuse(u: float, p: float, took: bool) -> float:
+    """A uniform ``u`` in [0, 1) that has decided a choice of probability ``p`` (taken when
+    u < p), rescaled to a fresh uniform in [0, 1) for the next decision: u / p if taken, else
+    (u - p) / (1 - p). Each decision spends log2 of its inverse probability of float64's 53 bits
+    (the light BVH's descent and ris's reservoir use it, one dimension for many decisions)."""
+    if took:
+        return min(u / p, ONE_BELOW)
+    return min((u - p) / (1.0 - p), ONE_BELOW)
+
+
 @jit
 def start(sampler: SamplerParams, pixel: int, sample: int):
     """The state ``(key, index, 0)`` of the lane that takes sample ``sample`` of pixel
