@@ -134,7 +134,7 @@ def test_equal_time_spends_the_budget(monkeypatch):
     """With a stand-in render whose every spp costs 0.1 s, equal-time mode ends within half a
     spp's time of the budget (the rule that keeps real runs within a few percent)."""
 
-    def fake_render(scene, strategy, settings, film=None, progress=False, estimator=None):
+    def fake_render(scene, strategy, settings, film=None, progress=False, estimator=None, learner=None):
         film = film if film is not None else Film(2, 2)
         film.add_block(0, np.ones((4, settings.spp, 3)))
         return RenderResult(film, 0.1 * settings.spp, 4 * settings.spp, 0, False)
@@ -536,7 +536,7 @@ def test_cpu_clock_budgets_process_time(monkeypatch):
     wall_per_spp, cpu_per_spp, budget = 0.1, 0.2, 5.0
     cpu = [0.0]
 
-    def fake_render(scene, strategy, settings, film=None, progress=False, estimator=None):
+    def fake_render(scene, strategy, settings, film=None, progress=False, estimator=None, learner=None):
         film = film if film is not None else Film(2, 2)
         film.add_block(0, np.ones((4, settings.spp, 3)))
         cpu[0] += cpu_per_spp * settings.spp

@@ -13,7 +13,8 @@ load_scene(source, width=None, height=None, base_dir=None, notify=None) -> Scene
 render(scene, strategy="mis", spp=64, seed=0, **options) -> Image
 read_image(path) -> Image
 compare(image, reference, seconds=None) -> dict of mse, relmse, variance, efficiency
-Strategy(name, heuristic, light_samples, bsdf_samples, one_sample, light_selection, light_sampling)
+Strategy(name, heuristic, light_samples, bsdf_samples, one_sample, light_selection, light_sampling,
+         allocation)
 Strategy.ris(candidates, sources, **fields) -> the ris strategy
 STRATEGIES, LIGHT_SAMPLINGS, LIGHT_SELECTIONS : the strategy, light-sampling and selection names.
 

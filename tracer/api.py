@@ -39,6 +39,8 @@ class Image:
     seconds : render wall time.   nonfinite : samples that came out NaN or infinite (set to 0).
     interrupted : Ctrl-C stopped the render early.   film : the underlying statistics, with
     the render record (``tracer.record``) that the EXR header stores.
+    learned : (H, W) maps of what the render learned between passes (``tracer.tuning``), by
+    name: ``allocation.light`` (adaptive allocation), ``alpha.R/G/B`` (optimal MIS); else empty.
     """
 
     mean: np.ndarray
@@ -50,6 +52,7 @@ class Image:
     nonfinite: int
     interrupted: bool
     film: Film
+    learned: dict[str, np.ndarray]
 
     @classmethod
     def of_film(cls, film: Film, seconds: float | None = None, nonfinite: int = 0,
@@ -57,7 +60,8 @@ class Image:
         shape = (film.height, film.width, 3)
         return cls(film.image(), film.variance().reshape(shape), film.variance_of_mean().reshape(shape),
                    film.count.reshape(film.height, film.width), film.spp,
-                   (film.record.seconds or 0.0) if seconds is None else seconds, nonfinite, interrupted, film)
+                   (film.record.seconds or 0.0) if seconds is None else seconds, nonfinite, interrupted, film,
+                   {name: plane.reshape(film.height, film.width) for name, plane in film.learned.items()})
 
     def write(self, path: str | os.PathLike[str], exposure: float = 0.0, half: bool = False) -> None:
         """Write the EXR (mean, variance, render record) to ``path`` and a PNG preview beside it
@@ -75,7 +79,7 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
            light_samples: int = 1, bsdf_samples: int = 1, one_sample: bool = False,
            light_selection: str = "power", light_sampling: str | None = None, sampler: str | None = None,
            ris_candidates: int = DEFAULT_RIS_CANDIDATES, ris_sources: str = "light",
-           progress: bool = False) -> Image:
+           allocation: str = "fixed", progress: bool = False) -> Image:
     """Render ``scene`` (a :class:`Scene`, or a path or dict for :func:`load_scene`) with
     ``spp`` samples per pixel.
 
@@ -86,6 +90,10 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
     ris_candidates, ris_sources : ``ris`` keeps one of ``ris_candidates`` candidates per camera
         sample, all light samples (``"light"``) or half of them BSDF samples (``"light+bsdf"``);
         light_samples and bsdf_samples are then not used (``Strategy.ris``).
+    heuristic : ``balance``, ``power``, ``max`` or ``optimal`` (the balance heuristic plus a
+        control variate each pixel learns from earlier passes: ``tracer.tuning``).
+    allocation : ``fixed`` (light_samples and bsdf_samples per camera sample) or ``adaptive``
+        (mis: each pixel splits that many samples as earlier passes say is best).
     light_sampling : ``area``, ``solid-angle`` or ``solid-angle-cos`` (default: the scene's
         ``[render] light_sampling``, else ``Strategy``'s default).
     sampler : ``independent``, ``stratified`` or ``sobol`` (default: the scene's ``[render]
@@ -106,7 +114,7 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
                                     light_selection=light_selection, light_sampling=sampling)
         else:
             strategy = Strategy(strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection,
-                                sampling)
+                                sampling, allocation)
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
         raise ValueError(f"spp must be a whole number >= 1, got {spp!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:

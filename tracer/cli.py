@@ -123,7 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render_options(ref)
     # None = not given: a resume takes these from the file, a new reference the usual defaults.
     ref.set_defaults(run=cmd_reference, heuristic=None, light_samples=None, bsdf_samples=None,
-                     one_sample=None, light_selection=None, light_sampling=None)
+                     one_sample=None, light_selection=None, light_sampling=None, allocation=None)
 
     c = sub.add_parser("compare", help="compare strategies against a reference: images, maps, charts",
                        description="Render several strategies at equal spp or equal time and compare them "
@@ -260,6 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_strategy_options(p: argparse.ArgumentParser, compared: bool = False) -> None:
     """The estimator's options; with ``compared``, ``--light-sampling`` takes a list."""
     from .strategy import (
+        ALLOCATIONS,
         DEFAULT_LIGHT_SAMPLING,
         DEFAULT_RIS_CANDIDATES,
         HEURISTICS,
@@ -268,8 +269,24 @@ def _add_strategy_options(p: argparse.ArgumentParser, compared: bool = False) ->
         RIS_SOURCES,
     )
 
-    p.add_argument("--heuristic", choices=HEURISTICS, default="power",
-                   help="MIS heuristic (default power); also weights ris's candidates of two techniques")
+    heuristics = "balance, power, max, or optimal (balance plus a control variate learned per pixel from " \
+        "earlier passes)"
+    allocations = "fixed (N light + M bsdf) or adaptive (mis: each pixel splits N + M samples as earlier " \
+        "passes say is best)"
+    if compared:
+        p.add_argument("--heuristic", type=_names_of(HEURISTICS), default=["power"], metavar="LIST",
+                       help=f"comma-separated MIS heuristics to compare, each a mis run: some of "
+                       f"{heuristics} "
+                       "(default power; ris uses the first of balance, power, max given)")
+        p.add_argument("--allocation", type=_names_of(ALLOCATIONS), default=["fixed"], metavar="LIST",
+                       help=f"comma-separated sample allocations of mis to compare: {allocations} "
+                       "(default fixed)")
+    else:
+        p.add_argument("--heuristic", choices=HEURISTICS, default="power",
+                       help=f"MIS heuristic: {heuristics}; default power (also weights ris's candidates of "
+                       "two techniques)")
+        p.add_argument("--allocation", choices=ALLOCATIONS, default="fixed",
+                       help=f"how mis splits its samples: {allocations}; default fixed")
     p.add_argument("--light-samples", type=_samples_per_camera_sample, default=1, metavar="N",
                    help="light samples per camera sample (light, mis; default 1)")
     p.add_argument("--bsdf-samples", type=_samples_per_camera_sample, default=1, metavar="M",
@@ -406,11 +423,12 @@ def _terminate_like_ctrl_c() -> None:
 
 
 def _strategy_from(args: argparse.Namespace, name: str, light_sampling: str | None = None,
-                   light_selection: str | None = None, ris: tuple[int, str] | None = None):
+                   light_selection: str | None = None, ris: tuple[int, str] | None = None,
+                   heuristic: str | None = None, allocation: str | None = None):
     """The strategy ``name`` with the command line's options; the light sampling is
-    ``light_sampling``, else ``--light-sampling``, else the default; the light selection and
-    ris's ``(candidates, sources)`` likewise (compare's options are lists, which its caller
-    expands)."""
+    ``light_sampling``, else ``--light-sampling``, else the default; the light selection,
+    ris's ``(candidates, sources)``, the heuristic and the allocation likewise (compare's
+    options are lists, which its caller expands)."""
     from .strategy import DEFAULT_LIGHT_SAMPLING, DEFAULT_RIS_CANDIDATES, RIS_SOURCES, Strategy
 
     def given(option):
@@ -419,14 +437,16 @@ def _strategy_from(args: argparse.Namespace, name: str, light_sampling: str | No
 
     sampling = light_sampling or given("light_sampling") or DEFAULT_LIGHT_SAMPLING
     selection = light_selection or given("light_selection") or "power"
+    heuristic = heuristic or given("heuristic") or "power"
+    allocation = allocation or given("allocation") or "fixed"
     try:
         if name == "ris":
             candidates, sources = ris or (given("ris_candidates") or DEFAULT_RIS_CANDIDATES,
                                           given("ris_sources") or RIS_SOURCES[0])
-            return Strategy.ris(candidates, sources, heuristic=args.heuristic, light_selection=selection,
+            return Strategy.ris(candidates, sources, heuristic=heuristic, light_selection=selection,
                                 light_sampling=sampling)
-        return Strategy(name, args.heuristic, args.light_samples, args.bsdf_samples,
-                        args.one_sample, selection, sampling)
+        return Strategy(name, heuristic, args.light_samples, args.bsdf_samples,
+                        args.one_sample, selection, sampling, allocation)
     except ValueError as exc:
         raise InputError(str(exc), "command line") from None
 
@@ -576,7 +596,7 @@ def cmd_reference(args: argparse.Namespace) -> int:
     output = _exr_path(args.output or f"{Path(args.scene).stem}_reference.exr")
     film, seed, first, sampler = None, args.seed, 0, args.sampler
     defaults = {"heuristic": "power", "light_samples": 1, "bsdf_samples": 1, "one_sample": False,
-                "light_selection": "power", "light_sampling": None}
+                "light_selection": "power", "light_sampling": None, "allocation": "fixed"}
     width, height = args.width, args.height
     if args.resume:
         if not output.is_file():
@@ -680,7 +700,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     from .imagefiles import read_exr
-    from .strategy import STRATEGIES, Strategy
+    from .strategy import CLASSIC_HEURISTICS, STRATEGIES, Strategy
     from .study import report
     from .study.compare import ALLOCATIONS, Comparison, independent_seeds, scene_for_reference
 
@@ -718,8 +738,19 @@ def cmd_compare(args: argparse.Namespace) -> int:
         return _strategy_from(args, name, ris=ris).light_count > 0
 
     selections = args.light_selection
-    strategies = [_strategy_from(args, name, sampling, selection, ris) for name in names
+    # mis runs every heuristic with every allocation; ris weighs its candidates with the first
+    # classic heuristic given (optimal weights can be negative).
+    classic = [h for h in args.heuristic if h in CLASSIC_HEURISTICS] or ["power"]
+
+    def weightings(name):
+        if name == "mis":
+            return [(h, a) for h in args.heuristic for a in args.allocation]
+        return [(classic[0] if name == "ris" else "power", "fixed")]
+
+    strategies = [_strategy_from(args, name, sampling, selection, ris, heuristic, allocation)
+                  for name in names
                   for ris in (ris_settings if name == "ris" else [None])
+                  for heuristic, allocation in weightings(name)
                   for sampling in (samplings if takes_lights(name, ris) else samplings[:1])
                   for selection in (selections if takes_lights(name, ris) else selections[:1])]
     sampler_names = args.sampler or [scene.render_defaults.get("sampler", DEFAULT_SAMPLER)]
@@ -736,7 +767,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                     sweep += comparison.sweep(strategy, seeds, max_spp=args.spp, budget=args.time,
                                               sampler=sampler)
             first_sampling = _strategy_from(args, "mis", samplings[0]).light_sampling
-            allocation = [run(Strategy("mis", args.heuristic, n_light, n_bsdf,
+            allocation = [run(Strategy("mis", classic[0], n_light, n_bsdf,
                                        light_selection=args.light_selection[0],
                                        light_sampling=first_sampling),
                               sampler_names[0])

@@ -66,7 +66,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import lights, materials, mis, samplers, warp
+from . import lights, materials, mis, samplers, tuning, warp
 from .embree import RayCaster
 from .frame import add_scaled, basis, dot, normalized, scale, sub, to_local, to_world
 from .geometry import SceneRays, offset_origin, shading_normal, surface_point
@@ -75,6 +75,7 @@ from .lights import LightSampler
 from .samplers import dimensions
 from .scene import Scene
 from .strategy import Strategy
+from .tuning import Tuning
 
 # Codes of the direction techniques for compiled code.
 NO_DIRECTIONS, UNIFORM, COSINE, BSDF = 0, 1, 2, 3
@@ -108,6 +109,11 @@ class Plan(NamedTuple):
     direction : direction technique code.   heuristic : MIS heuristic code.
     one_sample : one-sample MIS.   c_light : probability of the light technique in it.
     ris : resample one candidate per shading point (module docstring).
+    optimal : add up optimal MIS's control variate C per lane (``tracer.tuning``).
+    adaptive : each pixel's expected light count comes from the tuning (``tracer.tuning``).
+    total : technique samples per camera sample N (1 with one-sample MIS).
+    light_slots : light samples a camera sample may take at most (where direction samples'
+        dimensions begin).
     """
 
     n_light: int
@@ -117,6 +123,10 @@ class Plan(NamedTuple):
     one_sample: bool
     c_light: float
     ris: bool
+    optimal: bool
+    adaptive: bool
+    total: float
+    light_slots: int
 
 
 class Reservoirs(NamedTuple):
@@ -149,9 +159,17 @@ class DirectLighting:
                                  np.ascontiguousarray(m.twosided, dtype=np.bool_), float(scene.ray_epsilon),
                                  int(scene.triangle_count), np.ascontiguousarray(scene.corner_normals))
         n_light, n_dir = strategy.light_count, strategy.direction_count
+        one_sample = strategy.one_sample_mis
+        total = 1.0 if one_sample else float(n_light + n_dir)
         self.plan = Plan(n_light, n_dir, DIRECTION_CODE[strategy.direction_technique],
-                         mis.code(strategy.heuristic), strategy.one_sample_mis, n_light / (n_light + n_dir),
-                         ris)
+                         mis.code(strategy.heuristic), one_sample, n_light / (n_light + n_dir),
+                         ris, strategy.learns_control_variate, strategy.adaptive, total,
+                         n_light + n_dir if strategy.adaptive else n_light)
+
+    @property
+    def learns(self) -> bool:
+        """Whether the render loop must learn between passes (``tracer.tuning``)."""
+        return self.plan.optimal or self.plan.adaptive
 
     def radiance(self, origins: np.ndarray, dirs: np.ndarray, seed: int = 0, pixel: np.ndarray | None = None,
                  sample: np.ndarray | None = None, sampler: str = "independent") -> np.ndarray:
@@ -169,21 +187,31 @@ class DirectLighting:
         spp = int(sample.max()) + 1 if n else 1
         return self.shade_lanes(np.ascontiguousarray(origins, dtype=np.float32),
                                 np.ascontiguousarray(dirs, dtype=np.float32),
-                                samplers.make(sampler, seed, 0, spp), pixel, np.ascontiguousarray(sample))
+                                samplers.make(sampler, seed, 0, spp), pixel, np.ascontiguousarray(sample))[0]
 
     def shade_lanes(self, origins: np.ndarray, dirs: np.ndarray, sampler: samplers.SamplerParams,
-                    pixel: np.ndarray, sample: np.ndarray) -> np.ndarray:
-        """:meth:`radiance` for the render loop: float32 rays, a built sampler, int64 lanes."""
+                    pixel: np.ndarray, sample: np.ndarray,
+                    tuned: Tuning | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`radiance` for the render loop: float32 rays, a built sampler, int64 lanes,
+        and what the pass applies (``tracer.tuning``; None: the pilot's settings). Returns the
+        radiance ``(n, 3)`` (for optimal MIS, the balance estimate V, to which the render loop
+        adds a C) and the lane statistics ``(n, tuning.LANE_COLUMNS)`` ((0, ...) unless the
+        estimator learns)."""
         n = len(origins)
         plan = self.plan
-        shadow = RayBuffer.empty(n if plan.one_sample or plan.ris else n * plan.n_light)
-        direction = RayBuffer.empty(n if plan.one_sample else n * plan.n_dir)
+        tuned = tuned if tuned is not None else tuning.no_tuning()
+        slots = plan.light_slots
+        shadow = RayBuffer.empty(n if plan.one_sample or plan.ris else n * slots)
+        direction = RayBuffer.empty(n if plan.one_sample else n * (slots if plan.adaptive else plan.n_dir))
         reservoirs = Reservoirs.empty(n if plan.ris else 0)
+        # Optimal MIS needs each lane's C in every pass; the rest only while it is collected.
+        wanted = plan.optimal or (plan.adaptive and tuned.collect)
+        lane_stats = np.empty((n if wanted else 0, tuning.LANE_COLUMNS))
         prim = self.rays.first_hit(origins, dirs)
         radiance = np.empty((n, 3))
         tables = self.lights.tables
         n_shadow, n_direction = _shade(prim, origins, dirs, sampler, pixel, sample, self.surfaces, tables,
-                                       plan, radiance, shadow, direction, reservoirs)
+                                       plan, tuned, radiance, shadow, direction, reservoirs, lane_stats)
         d = slice(0, n_direction)
         if plan.ris:
             # The BSDF candidates meet their emitters; one shadow ray per lane for the kept one.
@@ -195,8 +223,8 @@ class DirectLighting:
         blocked = self.rays.occluded(shadow.origin[s], shadow.dir[s], shadow.tmax[s])
         if not plan.ris:
             found = self.rays.first_hit(direction.origin[d], direction.dir[d])
-        _gather(radiance, self.surfaces, tables, plan, shadow, blocked, direction, found)
-        return radiance
+        _gather(radiance, self.surfaces, tables, plan, tuned, shadow, blocked, direction, found, lane_stats)
+        return radiance, lane_stats
 
 
 class RayBuffer(NamedTuple):
@@ -212,6 +240,11 @@ class RayBuffer(NamedTuple):
         from them, as light sampling does.
     pdf : (c,) count-scaled pdf of the direction technique (direction rays only, for MIS).
     lane : (c,) camera lane the sample belongs to.   delta : (c,) a delta sample (weight 1).
+    other : (c,) the (expected) light sample count of the shading point: the MIS weights of
+        direction samples scale the light pdf by it.
+    control, v2, t : (c,) what an unblocked light sample adds to ``tracer.tuning``'s statistics
+        (its term of C, the mean square of its balance value over channels, p_l / (p_l + p_b));
+        written only when the estimator learns.
     """
 
     origin: np.ndarray
@@ -224,6 +257,10 @@ class RayBuffer(NamedTuple):
     pdf: np.ndarray
     lane: np.ndarray
     delta: np.ndarray
+    other: np.ndarray
+    control: np.ndarray
+    v2: np.ndarray
+    t: np.ndarray
 
     @classmethod
     def empty(cls, count: int) -> "RayBuffer":
@@ -231,7 +268,8 @@ class RayBuffer(NamedTuple):
         return cls(np.empty((count, 3), dtype=f32), np.empty((count, 3), dtype=f32),
                    np.empty(count, dtype=f32), np.empty((count, 3)), np.empty((count, 3)),
                    np.empty((count, 3)), np.empty((count, 3)), np.empty(count),
-                   np.empty(count, dtype=np.int64), np.empty(count, dtype=np.bool_))
+                   np.empty(count, dtype=np.int64), np.empty(count, dtype=np.bool_),
+                   np.empty(count), np.empty(count), np.empty(count), np.empty(count))
 
 
 # -------------------------------------------------------------------------------------------------
@@ -243,11 +281,13 @@ class RayBuffer(NamedTuple):
 
 @jit
 def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, light_tables, plan: Plan,
-           radiance, shadow: RayBuffer, direction: RayBuffer, reservoirs: Reservoirs):
+           tuned: Tuning, radiance, shadow: RayBuffer, direction: RayBuffer, reservoirs: Reservoirs,
+           lane_stats):
     """Camera hits -> emission seen directly into ``radiance (n, 3)``, and the shadow and
     direction rays of every shading point into the buffers. Returns their counts. ris: the
     light candidates go through ``reservoirs`` (the kept one in the lane's shadow row) and the
-    direction rays are the BSDF candidates, for ``_resample``."""
+    direction rays are the BSDF candidates, for ``_resample``. An estimator that learns zeroes
+    each lane's row of ``lane_stats`` and counts the samples and rays in it (``tracer.tuning``)."""
     hit_table, kinds, params, eps = (surfaces.hit_table, surfaces.material_kind, surfaces.material_params,
                                      surfaces.eps)
     first_sphere, twosided, corner_normals = surfaces.first_sphere, surfaces.twosided, surfaces.corner_normals
@@ -260,7 +300,10 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
     dir_origin, dir_dir = direction.origin, direction.dir
     dir_value, dir_point, dir_normal, dir_shading = direction.value, direction.point, direction.normal, \
         direction.shading
-    dir_pdf, dir_lane, dir_delta = direction.pdf, direction.lane, direction.delta
+    dir_pdf, dir_lane, dir_delta, dir_other = direction.pdf, direction.lane, direction.delta, direction.other
+    shadow_other, shadow_control, shadow_v2, shadow_t = shadow.other, shadow.control, shadow.v2, shadow.t
+    light_count, replicates, groups = tuned.light_count, tuned.replicates, tuned.groups
+    learning = len(lane_stats) > 0
     n_light, n_dir = float(plan.n_light), float(plan.n_dir)
     n_shadow = 0
     n_direction = 0
@@ -268,6 +311,8 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         radiance[lane, 0] = radiance[lane, 1] = radiance[lane, 2] = 0.0
         if plan.ris:
             weight_sum[lane] = 0.0
+        if learning:
+            lane_stats[lane, :] = 0.0
         p = prim[lane]
         if p < 0:
             continue
@@ -301,14 +346,24 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         if plan.ris:
             u_left[lane] = samplers.uniform(sampler, state, dimensions.TECHNIQUE_CHOICE)
 
-        # Which samples this point takes: (light samples, direction samples, their counts).
-        if plan.one_sample:
-            take_light = samplers.uniform(sampler, state, dimensions.TECHNIQUE_CHOICE) < plan.c_light
-            lights_here, dirs_here = (1, 0) if take_light else (0, 1)
-            own_light, own_dir = plan.c_light, 1.0 - plan.c_light
+        # Which samples this point takes: (light samples, direction samples, their expected
+        # counts). One-sample MIS and adaptive allocation draw the counts: floor(n̄_l) light
+        # samples and one more with probability frac(n̄_l), the rest direction samples.
+        if plan.one_sample or plan.adaptive:
+            own_light = plan.c_light if plan.one_sample else n_light
+            if plan.adaptive and len(light_count):
+                own_light = light_count[pixel[lane], (sample[lane] % replicates) % groups]
+            own_dir = plan.total - own_light
+            whole = math.floor(own_light)
+            extra = samplers.uniform(sampler, state, dimensions.TECHNIQUE_CHOICE) < own_light - whole
+            lights_here = int(whole) + (1 if extra else 0)
+            dirs_here = int(plan.total) - lights_here
         else:
             lights_here, dirs_here = plan.n_light, plan.n_dir
             own_light, own_dir = n_light, n_dir
+        if learning:
+            lane_stats[lane, tuning.LIGHT_TAKEN] = lights_here
+            lane_stats[lane, tuning.DIRECTION_TAKEN] = dirs_here
 
         # Light samples: f Le |cos| w_l / (own p_l); other = 0 (no direction technique) gives weight 1.
         for j in range(lights_here):
@@ -321,11 +376,21 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
             wi = to_local(s, t, normal, wi_world)
             f, pdf_bsdf = materials.eval_pdf(kind, params, material, wo, wi)
             c = max(wi[2], 0.0) / (own_light * pdf_light)
+            w, w_balance, share_t = 1.0, 1.0, 1.0
             if own_dir > 0.0 and plan.direction != NO_DIRECTIONS and not delta:
                 pdf_dir = pdf_bsdf if plan.direction == BSDF else _hemisphere_pdf(plan.direction, wi[2])
-                c *= mis.weight_of(plan.heuristic, own_light * pdf_light, own_dir * pdf_dir)
-            value = (f[0] * le[0] * c, f[1] * le[1] * c, f[2] * le[2] * c)
-            if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
+                w = mis.weight_of(plan.heuristic, own_light * pdf_light, own_dir * pdf_dir)
+                if learning:
+                    w_balance = mis.weight_of(mis.BALANCE, own_light * pdf_light, own_dir * pdf_dir)
+                    share_t = mis.weight_of(mis.BALANCE, pdf_light, pdf_dir)
+            raw = (f[0] * le[0] * c, f[1] * le[1] * c, f[2] * le[2] * c)
+            cw = c * w
+            value = (f[0] * le[0] * cw, f[1] * le[1] * cw, f[2] * le[2] * cw)
+            # A sample that cannot contribute casts no ray. Learning looks at the unweighted
+            # value: whether a sample carries light must not depend on the heuristic (max's
+            # weight 0 would hide it from the allocation's statistics).
+            carries = raw if learning else value
+            if not (carries[0] > 0.0 or carries[1] > 0.0 or carries[2] > 0.0):
                 _flag_nan(radiance, lane, value)
                 continue
             # The shadow ray runs from the offset origin to the sampled point, stopping short of it.
@@ -336,16 +401,23 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
                        lane, origin, to_target, max(length - eps, 0.0), value)
                 continue
             shadow_tmax[n_shadow] = max(length - eps, 0.0)
+            if learning:
+                # Unblocked, this sample adds (1 - w_bal) / n̄_l to C (``tracer.tuning``).
+                shadow_other[n_shadow] = own_light
+                shadow_control[n_shadow] = (1.0 - w_balance) / own_light
+                shadow_v2[n_shadow] = _mean_square(raw, w_balance)
+                shadow_t[n_shadow] = share_t
+                lane_stats[lane, tuning.LIGHT_RAYS] += 1.0
             n_shadow = _put(shadow_origin, shadow_dir, shadow_value, shadow_lane, n_shadow,
                             origin, to_target, value, lane)
 
         # Direction samples: f |cos| / (own p_d); _gather multiplies in the emitter it hits and
         # the MIS weight.
         for j in range(dirs_here):
-            u = samplers.uniform_pair(sampler, state, dimensions.direction(plan.n_light, j))
+            u = samplers.uniform_pair(sampler, state, dimensions.direction(plan.light_slots, j))
             wi, weight, pdf_dir, delta = _direction_sample(
                 plan.direction, kind, params, material, wo,
-                samplers.uniform(sampler, state, dimensions.lobe_choice(plan.n_light, j)), u[0], u[1])
+                samplers.uniform(sampler, state, dimensions.lobe_choice(plan.light_slots, j)), u[0], u[1])
             value = (weight[0] / own_dir, weight[1] / own_dir, weight[2] / own_dir)
             if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
                 _flag_nan(radiance, lane, value)
@@ -356,6 +428,9 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
                 continue  # it could only contribute 0: no ray
             dir_pdf[n_direction] = own_dir * pdf_dir
             dir_delta[n_direction] = delta
+            dir_other[n_direction] = own_light
+            if learning:
+                lane_stats[lane, tuning.DIRECTION_RAYS] += 1.0
             for axis in range(3):
                 dir_point[n_direction, axis] = x[axis]
                 dir_normal[n_direction, axis] = geometric[axis]
@@ -417,29 +492,69 @@ def _hemisphere_pdf(technique, cos_i):
 
 
 @jit
-def _gather(radiance, surfaces: Surfaces, light_tables, plan: Plan, shadow: RayBuffer, blocked,
-            direction: RayBuffer, prim):
+def _gather(radiance, surfaces: Surfaces, light_tables, plan: Plan, tuned: Tuning, shadow: RayBuffer, blocked,
+            direction: RayBuffer, prim, lane_stats):
     """Add to ``radiance`` the light samples whose shadow rays are unblocked, and the direction
-    samples whose rays hit the front of an emitter, weighted against the light technique."""
+    samples whose rays hit the front of an emitter, weighted against the light technique; an
+    estimator that learns adds what these samples tell to ``lane_stats`` (``tracer.tuning``)."""
     shadow_value, shadow_lane = shadow.value, shadow.lane
+    shadow_other, shadow_control, shadow_v2, shadow_t = shadow.other, shadow.control, shadow.v2, shadow.t
+    learning, collect = len(lane_stats) > 0, tuned.collect
+    shares = tuned.shares
     for row in range(len(blocked)):
         if not blocked[row]:
             lane = shadow_lane[row]
             for c in range(3):
                 radiance[lane, c] += shadow_value[row, c]
+            if learning:
+                _learn(lane_stats, lane, shares, collect, shadow_control[row], shadow_v2[row], shadow_t[row],
+                       shadow_other[row] / plan.total)
     hit_table, first_sphere = surfaces.hit_table, surfaces.first_sphere
-    other = plan.c_light if plan.one_sample else float(plan.n_light)
     tables, rays = _pdf_arrays(light_tables), _direction_arrays(direction)
-    lanes = direction.lane
+    lanes, others, pdfs, deltas = direction.lane, direction.other, direction.pdf, direction.delta
     for row in range(len(prim)):
         if prim[row] < 0:
             continue
-        hit, _, value = _direction_value(hit_table, first_sphere, tables, plan.heuristic, other, rays, row,
-                                         prim[row])
-        if hit:
-            lane = lanes[row]
-            for c in range(3):
-                radiance[lane, c] += value[c]
+        hit, _, value, raw, pdf_light = _direction_value(hit_table, first_sphere, tables, plan.heuristic,
+                                                         rays, row, prim[row])
+        if not hit:
+            continue
+        lane = lanes[row]
+        for c in range(3):
+            radiance[lane, c] += value[c]
+        if learning and (raw[0] > 0.0 or raw[1] > 0.0 or raw[2] > 0.0):
+            # Unblocked, a direction sample adds -p_l / q = -(1 - w_bal) / n̄_l to C; a delta
+            # lobe's sample (whose pdf is not a density) is the only technique's: w_bal = 1.
+            other = others[row]
+            w_balance, share_t = 1.0, 0.0
+            if not deltas[row]:
+                w_balance = mis.weight_of(mis.BALANCE, pdfs[row], other * pdf_light)
+                share_t = mis.weight_of(mis.BALANCE, pdf_light, pdfs[row] / (plan.total - other))
+            _learn(lane_stats, lane, shares, collect, -(1.0 - w_balance) / other,
+                   _mean_square(raw, w_balance), share_t, other / plan.total)
+
+
+@jit
+def _mean_square(raw, w: float) -> float:
+    """The mean over channels of (w x raw)^2: a sample's squared balance value, when ``raw``
+    is its unweighted value and w its balance weight."""
+    return ((raw[0] * w) ** 2 + (raw[1] * w) ** 2 + (raw[2] * w) ** 2) / 3.0
+
+
+@jit
+def _learn(lane_stats, lane: int, shares, collect: bool, control: float, v2: float, share_t: float,
+           share: float) -> None:
+    """Add to a lane's statistics one sample that carries light: its term of the control
+    variate C, and if ``collect``, for every candidate share c its estimate of the second
+    moment M(c), v^2 (a t + (1 - a)(1 - t)) / (c t + (1 - c)(1 - t)) with a = ``share``, the
+    share of light samples it was taken under (``tracer.tuning``)."""
+    lane_stats[lane, tuning.CONTROL] += control
+    if not collect:
+        return
+    used = share * share_t + (1.0 - share) * (1.0 - share_t)
+    for k in range(len(shares)):
+        c = shares[k]
+        lane_stats[lane, tuning.FIRST_SHARE + k] += v2 * used / (c * share_t + (1.0 - c) * (1.0 - share_t))
 
 
 @jit
@@ -453,20 +568,21 @@ def _pdf_arrays(light_tables):
 def _direction_arrays(direction: RayBuffer):
     """The direction buffer's arrays that ``_direction_value`` reads, as one plain tuple."""
     return (direction.dir, direction.value, direction.point, direction.normal, direction.shading,
-            direction.origin, direction.pdf, direction.delta)
+            direction.origin, direction.pdf, direction.delta, direction.other)
 
 
 @jit
-def _direction_value(hit_table, first_sphere: int, tables, heuristic: int, other: float, rays, row: int,
-                     p: int):
+def _direction_value(hit_table, first_sphere: int, tables, heuristic: int, rays, row: int, p: int):
     """What direction sample ``row``, whose ray hits primitive ``p``, adds: ``(hit, dist,
-    value)``, value = its weight x the emitter's radiance x its MIS weight against ``other``
-    (the light technique's count) (RGB), dist the emitter's distance from the shading point,
-    hit False if it adds nothing (the emitter's back side). ``tables`` and ``rays`` are tuples of
-    the light tables' and the direction buffer's arrays, unpacked by the caller before its loop
-    (a named tuple's field read in the loop costs a reference-count update)."""
+    value, raw, pdf_light)``, value = raw x its MIS weight against the light technique (whose
+    count is the row's ``other``), raw = its weight x the emitter's radiance (RGB), dist the
+    emitter's distance from the shading point, pdf_light the light technique's pdf of the
+    direction (0 for a delta sample or without light samples), hit False if it adds nothing
+    (the emitter's back side). ``tables`` and ``rays`` are tuples of the light tables' and the
+    direction buffer's arrays, unpacked by the caller before its loop (a named tuple's field
+    read in the loop costs a reference-count update)."""
     pmf, nodes, child, trail, trail_depth, technique, light_rows, candidate_of_prim = tables
-    dirs, values, points, normals, shadings, origins, pdfs, deltas = rays
+    dirs, values, points, normals, shadings, origins, pdfs, deltas, others = rays
     wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
     x = (points[row, 0], points[row, 1], points[row, 2])
     if p < first_sphere:
@@ -478,16 +594,19 @@ def _direction_value(hit_table, first_sphere: int, tables, heuristic: int, other
         v = sub(y, x)
         dist = math.sqrt(dot(v, v))
     if not cos_normal < 0.0:
-        return False, 0.0, (0.0, 0.0, 0.0)  # emitters shine from the front only
+        return False, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0  # emitters shine from the front only
     w = 1.0
+    pdf_light = 0.0
+    other = others[row]
     if other > 0.0 and not deltas[row]:
         n = (normals[row, 0], normals[row, 1], normals[row, 2])
         receiver = (shadings[row, 0], shadings[row, 1], shadings[row, 2])
         pdf_light = lights.pdf(pmf, nodes, child, trail, trail_depth, technique, light_rows,
                                candidate_of_prim, x, n, receiver, p, wi, dist)
         w = mis.weight_of(heuristic, pdfs[row], other * pdf_light)
-    return True, dist, (values[row, 0] * hit_table[p, 12] * w, values[row, 1] * hit_table[p, 13] * w,
-                        values[row, 2] * hit_table[p, 14] * w)
+    raw = (values[row, 0] * hit_table[p, 12], values[row, 1] * hit_table[p, 13],
+           values[row, 2] * hit_table[p, 14])
+    return True, dist, (raw[0] * w, raw[1] * w, raw[2] * w), raw, pdf_light
 
 
 @jit
@@ -531,8 +650,8 @@ def _resample(radiance, surfaces: Surfaces, light_tables, plan: Plan, direction:
     for row in range(len(prim)):
         if prim[row] < 0:
             continue
-        hit, dist, value = _direction_value(hit_table, first_sphere, tables, plan.heuristic,
-                                            float(plan.n_light), rays, row, prim[row])
+        hit, dist, value, _, _ = _direction_value(hit_table, first_sphere, tables, plan.heuristic, rays, row,
+                                                  prim[row])
         if not hit:
             continue
         x = (points[row, 0], points[row, 1], points[row, 2])

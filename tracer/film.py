@@ -50,6 +50,9 @@ class Film:
     replicates : R (``tracer.samplers.REPLICATES``) for samplers with replicates, else 0.
     rep_count : (P, R) int64 samples per replicate.   rep_mean : (P, R, 3) float64 their means.
         (None when ``replicates`` is 0.)
+    learned : per-pixel maps ``(P,)`` of what the render learned between passes, by EXR channel
+        name (``tracer.tuning.Learner.maps``): written for a user to see, never read back, and
+        dropped by a merge (they describe one render).
     """
 
     width: int
@@ -61,6 +64,7 @@ class Film:
     replicates: int = 0
     rep_count: np.ndarray | None = None
     rep_mean: np.ndarray | None = None
+    learned: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         n = self.width * self.height
@@ -99,13 +103,15 @@ class Film:
             raise InputError(f"cannot merge a film of {other.replicates} replicates into one of "
                              f"{self.replicates}: their error estimates would not combine")
         _merge(self.count, self.mean, self.m2, other.count, other.mean, other.m2)
+        self.learned = {}
         if self.replicates:
             _merge_replicates(self.rep_count, self.rep_mean, other.rep_count, other.rep_mean)
 
     def copy(self) -> "Film":
         replicas = (self.rep_count.copy(), self.rep_mean.copy()) if self.replicates else (None, None)
         return Film(self.width, self.height, self.count.copy(), self.mean.copy(), self.m2.copy(),
-                    dataclasses.replace(self.record), self.replicates, *replicas)
+                    dataclasses.replace(self.record), self.replicates, *replicas,
+                    {name: plane.copy() for name, plane in self.learned.items()})
 
     def variance(self) -> np.ndarray:
         """(P, 3) variance of one sample's estimate, such that variance / count is the variance

@@ -15,6 +15,11 @@ value for every sampler, and add each replicate's mean and count as layers
 ``replicate<r>.R/G/B`` and ``replicate<r>.samples`` (float32), which merges and resumes pool
 replicate by replicate.
 
+A render that learned between passes (``tracer.tuning``) adds what it learned per pixel:
+``allocation.light`` (adaptive allocation: the share of a camera sample's technique samples
+that are light samples) and ``alpha.R/G/B`` (optimal MIS: the control variate's coefficient).
+They are for looking at; reads ignore them.
+
 Every write is atomic (``tracer.atomic``) and checked: an error from OpenImageIO, also at
 close, raises ``InputError`` and leaves any existing file as it was.
 """
@@ -64,6 +69,9 @@ def write_exr(path: str | os.PathLike[str], film: Film, half: bool = False) -> N
         for r in range(film.replicates):
             names += [f"{REPLICATE_LAYER.format(r)}.{c}" for c in ("R", "G", "B", COUNT_CHANNEL)]
             planes += [film.rep_mean[:, r, :], film.rep_count[:, r, None].astype(np.float64)]
+    for name, plane in film.learned.items():
+        names.append(name)
+        planes.append(plane[:, None])
     with np.errstate(over="ignore"):
         pixels = np.ascontiguousarray(np.concatenate(planes, axis=1), dtype=np.float32)
     bad = ~np.all(np.isfinite(pixels), axis=1)

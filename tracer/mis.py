@@ -14,14 +14,17 @@ import math
 from .jit import jit
 from .strategy import HEURISTICS
 
-BALANCE, POWER, MAX = 0, 1, 2  # codes of HEURISTICS for compiled code
+# Codes of HEURISTICS for compiled code. OPTIMAL weights as BALANCE does: optimal MIS is the
+# balance heuristic plus a control variate (``tracer.tuning``), which the kernels add apart.
+BALANCE, POWER, MAX, OPTIMAL = 0, 1, 2, 3
 POWER_BETA = 2.0  # the power heuristic below squares: beta = 2 as in Veach's thesis
 
 
 @jit
 def weight_of(heuristic: int, mine: float, other: float) -> float:
     """The weight in [0, 1] of a sample whose own (count-scaled) pdf is ``mine`` when the other
-    technique's is ``other`` (both >= 0); ``heuristic`` is a code BALANCE, POWER or MAX.
+    technique's is ``other`` (both >= 0); ``heuristic`` is a code BALANCE, POWER, MAX or OPTIMAL
+    (which weights as BALANCE).
 
     Written through the ratio other/mine so that huge or infinite pdfs (near-specular lobes)
     give 1 or 0 instead of inf/inf = NaN; a sample with mine = 0 gets 0.
@@ -31,7 +34,7 @@ def weight_of(heuristic: int, mine: float, other: float) -> float:
     ratio = other / mine
     if math.isnan(ratio):  # inf / inf: equal pdfs in the limit
         ratio = 1.0
-    if heuristic == BALANCE:
+    if heuristic == BALANCE or heuristic == OPTIMAL:
         return 1.0 / (1.0 + ratio)
     if heuristic == POWER:
         return 1.0 / (1.0 + ratio * ratio)

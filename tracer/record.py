@@ -34,7 +34,7 @@ from .errors import InputError
 PREFIX = "tracer:"
 # The fields that define the estimator: renders may be pooled only if all of them agree.
 ESTIMATOR_FIELDS = ("strategy", "heuristic", "light_samples", "bsdf_samples", "one_sample",
-                    "light_selection", "light_sampling", "sampler")
+                    "light_selection", "light_sampling", "allocation", "sampler")
 MAX_SEED = 2**64 - 1
 MAX_SAMPLE_INDEX = 2**53  # sample counts stay exact in float64
 # (seed, first, next): samples first .. next - 1 of every pixel, drawn with seed.
@@ -82,7 +82,7 @@ class RenderRecord:
     """How a render was made. ``None`` where a file did not say (files of other tools).
 
     strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection,
-        light_sampling : the estimator (``tracer.strategy.Strategy``; heuristic ``none`` unless
+        light_sampling, allocation : the estimator (``tracer.strategy.Strategy``; heuristic ``none`` unless
         the strategy is mis, light_sampling ``none`` unless it takes light samples).
     sampler : the random-number sampler (``independent``).
     samples : the sample ranges ``(seed, first, next)`` the film holds (``canonical_ranges``).
@@ -98,6 +98,7 @@ class RenderRecord:
     one_sample: bool | None = None
     light_selection: str | None = None
     light_sampling: str | None = None
+    allocation: str | None = None
     sampler: str | None = None
     samples: tuple[SampleRange, ...] | None = None
     seconds: float | None = None
@@ -116,7 +117,7 @@ class RenderRecord:
                    heuristic=strategy.recorded_heuristic,
                    light_samples=int(strategy.light_count), bsdf_samples=int(strategy.direction_count),
                    one_sample=bool(strategy.one_sample), light_selection=strategy.light_selection,
-                   light_sampling=strategy.recorded_light_sampling,
+                   light_sampling=strategy.recorded_light_sampling, allocation=strategy.allocation,
                    sampler=sampler, samples=((int(seed), int(first_sample), int(first_sample + spp)),),
                    seconds=float(seconds), scene=str(scene.path), scene_digest=scene.digest,
                    version=__version__)
@@ -209,9 +210,9 @@ def _names() -> dict[str, tuple[str, ...]]:
     with the file's sampler. (The strategy and heuristic are only compared and shown, and other
     tools name theirs as they like: the Mitsuba cross-check writes ``mitsuba-direct``.)"""
     from .sampler_choice import SAMPLERS
-    from .strategy import LIGHT_SAMPLINGS
+    from .strategy import ALLOCATIONS, LIGHT_SAMPLINGS
 
-    return {"sampler": SAMPLERS, "light_sampling": (*LIGHT_SAMPLINGS, "none")}
+    return {"sampler": SAMPLERS, "light_sampling": (*LIGHT_SAMPLINGS, "none"), "allocation": ALLOCATIONS}
 
 
 def _old_light_sampling(record: RenderRecord) -> str:
@@ -243,6 +244,8 @@ def check_mergeable(a: RenderRecord, b: RenderRecord, name_a: str = "the first r
             va, vb = va or "independent", vb or "independent"
         if name == "light_sampling":  # files from before it existed sampled lights by area
             va, vb = va or _old_light_sampling(a), vb or _old_light_sampling(b)
+        if name == "allocation":  # files from before it existed (tracer <= 0.6) had fixed counts
+            va, vb = va or "fixed", vb or "fixed"
         if va != vb:
             raise InputError(f"cannot pool {name_a} and {name_b}: different {PREFIX}{name} "
                              f"({va!r} and {vb!r})")

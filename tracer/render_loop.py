@@ -7,6 +7,13 @@ sample, never on the batch size or the threads, and every random number is a fun
 in a fixed order. So the same seed gives the same image bit for bit whatever the batch size
 and the number of threads. Threads overlap the batches: Embree and the compiled kernels
 release the GIL.
+
+Estimators that learn between passes (optimal MIS, adaptive allocation: ``tracer.tuning``)
+learn again after passes 1, 2, 4, 8, ... (``relearns``): what they learn is an estimate whose
+error falls as one over the square root of the samples behind it, so it has changed markedly
+when those have doubled, and the threads wait only then. Before such a pass starts, every batch
+of the passes before it is merged, so the image still depends only on the seed and the
+settings.
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import interrupts, samplers
+from . import interrupts, samplers, tuning
 from .errors import InputError
 from .estimators import DirectLighting
 from .film import Film
@@ -73,7 +80,8 @@ class RenderResult:
 
     nonfinite counts samples that came out NaN or infinite (they were set to 0);
     interrupted is true when Ctrl-C stopped the render early (the film keeps every finished
-    batch, with its true per-pixel counts).
+    batch, with its true per-pixel counts); learner holds what an estimator that learns
+    (``tracer.tuning``) has learned, for a render that continues this one (else None).
     """
 
     film: Film
@@ -81,6 +89,7 @@ class RenderResult:
     samples: int
     nonfinite: int
     interrupted: bool
+    learner: tuning.Learner | None = None
 
 
 def pass_samples(spp: int, pixels: int, rays_per_sample: int) -> int:
@@ -117,22 +126,44 @@ def lanes_of(batch: Batch) -> tuple[np.ndarray, np.ndarray]:
     return pixel, sample
 
 
-def render_batch(estimator: DirectLighting, batch: Batch,
-                 sampler: samplers.SamplerParams) -> tuple[np.ndarray, int]:
-    """Render one batch: returns samples ``(npix, k, 3)`` and the count of non-finite ones."""
+def render_batch(estimator: DirectLighting, batch: Batch, sampler: samplers.SamplerParams,
+                 tuned: tuning.Tuning | None = None) -> tuple[np.ndarray, int, np.ndarray | None]:
+    """Render one batch with what the pass applies (``tuned``; None: nothing learned):
+    returns samples ``(npix, k, 3)``, the count of non-finite ones, and for an estimator that
+    learns the batch's per-pixel sums if the tuning collects them (``tracer.tuning.reduce_lanes``;
+    else None)."""
     pixel, sample = lanes_of(batch)
     origins, dirs = estimator.scene.camera.lane_rays(sampler, pixel, sample)
-    radiance = estimator.shade_lanes(origins, dirs, sampler, pixel, sample)
+    radiance, lane_stats = estimator.shade_lanes(origins, dirs, sampler, pixel, sample, tuned)
+    sums = None
+    if estimator.learns:
+        tuned = tuned if tuned is not None else tuning.no_tuning()
+        if tuned.collect:
+            sums = tuning.reduce_lanes(radiance, lane_stats, batch.npix, batch.k, batch.first_sample,
+                                       tuned.replicates, tuned.groups)
+        if len(tuned.alpha):
+            tuning.apply_control(radiance, lane_stats, tuned.alpha, batch.first_pixel, batch.k,
+                                 batch.first_sample, tuned.replicates, tuned.groups)
     nonfinite = _zero_nonfinite(radiance)
-    return radiance.reshape(batch.npix, batch.k, 3), nonfinite
+    return radiance.reshape(batch.npix, batch.k, 3), nonfinite, sums
+
+
+def relearns(batch: Batch, first_sample: int, k: int) -> bool:
+    """Whether an estimator that learns learns again before ``batch``: before the first batch
+    of passes 1, 2, 4, 8, ... of a render whose passes of ``k`` samples begin at
+    ``first_sample``."""
+    index, offset = divmod(batch.first_sample - first_sample, k)
+    return batch.first_pixel == 0 and offset == 0 and index > 0 and index & (index - 1) == 0
 
 
 def _compile(estimator: DirectLighting, film: Film, sampler: samplers.SamplerParams) -> None:
     """Run a batch's kernels once on zero lanes before the clock starts, so that numba compiles
     them (or loads them from its cache) then: the first render after an install would otherwise
     count seconds of compilation as rendering, unfair in an equal-time comparison."""
-    render_batch(estimator, Batch(0, 1, 0, 0), sampler)
+    sums = render_batch(estimator, Batch(0, 1, 0, 0), sampler, tuning.no_tuning())[2]
     film.add_block(0, np.zeros((0, 1, 3)))
+    if sums is not None:  # the learning's own kernels
+        tuning.warm_up()
 
 
 @jit
@@ -147,7 +178,8 @@ def _zero_nonfinite(radiance: np.ndarray) -> int:
 
 
 def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Film | None = None,
-           progress: bool = False, estimator: DirectLighting | None = None) -> RenderResult:
+           progress: bool = False, estimator: DirectLighting | None = None,
+           learner: tuning.Learner | None = None) -> RenderResult:
     """Render ``settings.spp`` samples per pixel into ``film`` (a new one if None).
 
     The film's record (``tracer.record``) is set to describe all it holds: the strategy and
@@ -157,6 +189,10 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     (``InputError`` otherwise: its record could not say what the film holds). Ctrl-C stops the
     render, also during the first compilation: batches already running
     finish and are kept, the rest are dropped, and the result says ``interrupted``.
+
+    An estimator that learns between passes starts from ``learner`` (the ``learner`` of the
+    result of a render this one continues, as ``compare`` continues renders to fill a time
+    budget), else from nothing, with a pilot pass.
     """
     last = settings.first_sample + settings.spp
     if settings.sampler not in samplers.SAMPLERS:
@@ -194,10 +230,14 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     start = time.perf_counter()
     seconds = 0.0
 
-    def merge(batch: Batch, result: tuple[np.ndarray, int]) -> None:
+    continues = learner is not None
+
+    def merge(batch: Batch, result: tuple[np.ndarray, int, np.ndarray | None]) -> None:
         nonlocal nonfinite, samples
-        block, bad = result
+        block, bad, sums = result
         film.add_block(batch.first_pixel, block, batch.first_sample)
+        if sums is not None:
+            learner.add(batch.first_pixel, sums)
         nonfinite += bad
         samples += batch.lanes
         if bar is not None:
@@ -210,8 +250,8 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         # so that --light-samples 10000 shrinks the batches instead of exhausting memory.
         per_sample = runs.samples_per_lane
         lanes = max(1, settings.batch_lanes * 2 // max(2, per_sample))
-        batches = plan_batches(cam.width, cam.height, settings.spp, settings.first_sample, lanes,
-                               pass_samples(settings.spp, cam.width * cam.height, per_sample))
+        k = pass_samples(settings.spp, cam.width * cam.height, per_sample)
+        batches = plan_batches(cam.width, cam.height, settings.spp, settings.first_sample, lanes, k)
         # numba's compiler cannot take a KeyboardInterrupt (one that lands in LLVM's callbacks
         # leaves it broken): a signal during the compilation stops the render right after it.
         with interrupts.deferred("tracer: interrupted; stopping as soon as the kernels are compiled"
@@ -225,17 +265,38 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
                   "(once after an install or an edit; later runs load them from the cache)", file=sys.stderr)
         bar = _progress_bar(cam.width * cam.height * settings.spp, progress)
         start = time.perf_counter()
+        if estimator.learns and learner is None:
+            learner = tuning.Learner(cam.width * cam.height, cam.width, replicates, runs.light_count,
+                                     runs.direction_count, estimator.plan.optimal, estimator.plan.adaptive)
+        elif not estimator.learns:
+            learner = None
         threads = max(1, settings.threads)
+
+        passes = -(-settings.spp // k)
+
+        def learns_before(batch: Batch) -> bool:
+            return learner is not None and relearns(batch, settings.first_sample, k)
+
+        def learn(batch: Batch | None) -> tuning.Tuning:
+            # Statistics are collected only while a later pass (or a render that continues
+            # this one) will learn from them.
+            index = 0 if batch is None else (batch.first_sample - settings.first_sample) // k
+            return learner.tuning(collect=continues or max(1, 2 * index) < passes)
+
         if threads == 1:
+            tuned = learn(None) if learner is not None else None
             for batch in batches:
-                result = render_batch(estimator, batch, sampler)
+                if learns_before(batch):
+                    tuned = learn(batch)
+                result = render_batch(estimator, batch, sampler, tuned)
                 with interrupts.deferred() as arrived:  # a batch is merged whole or not at all
                     merge(batch, result)
                 if arrived:
                     raise KeyboardInterrupt
         else:
             with ThreadPoolExecutor(max_workers=threads) as pool:
-                interrupted = _run_pipelined(pool, threads, batches, estimator, sampler, merge)
+                interrupted = _run_pipelined(pool, threads, batches, estimator, sampler, merge,
+                                             learn if learner is not None else None, learns_before)
         seconds = time.perf_counter() - start
     except KeyboardInterrupt:
         interrupted = True
@@ -247,7 +308,9 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     # started one is merged), so an interrupted render drew first .. first + (most added) - 1.
     drawn = int((film.count - count_before).max()) if interrupted and len(film.count) else settings.spp
     film.record = _record(scene, runs, settings, drawn, seconds, earlier)
-    return RenderResult(film, seconds, samples, nonfinite, interrupted)
+    if learner is not None:
+        film.learned = learner.maps()
+    return RenderResult(film, seconds, samples, nonfinite, interrupted, learner)
 
 
 def render_complete(scene: Scene, strategy: Strategy, settings: RenderSettings, **options) -> RenderResult:
@@ -280,12 +343,16 @@ def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, drawn: i
 
 
 def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: Iterator[Batch],
-                   estimator: DirectLighting, sampler: samplers.SamplerParams, merge) -> bool:
-    """Keep 2 x threads batches in flight and merge them in submission order.
+                   estimator: DirectLighting, sampler: samplers.SamplerParams, merge,
+                   learn=None, learns_before=None) -> bool:
+    """Keep 2 x threads batches in flight and merge them in submission order; for an estimator
+    that learns, before each batch for which ``learns_before(batch)``, merge every batch in
+    flight, then ``learn(batch)`` the tuning the next batches apply.
 
     Returns True if Ctrl-C stopped it; then the batches already started are awaited and kept.
     """
     in_flight: deque[tuple[Batch, Future]] = deque()
+    tuned = learn(None) if learn is not None else None
 
     def merge_oldest() -> None:
         # The wait is interruptible; taking the batch off the queue and merging it are not, so
@@ -300,7 +367,11 @@ def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: Iterator[Bat
 
     try:
         for batch in batches:
-            in_flight.append((batch, pool.submit(render_batch, estimator, batch, sampler)))
+            if learn is not None and learns_before(batch):
+                while in_flight:
+                    merge_oldest()
+                tuned = learn(batch)
+            in_flight.append((batch, pool.submit(render_batch, estimator, batch, sampler, tuned)))
             if len(in_flight) >= 2 * threads:
                 merge_oldest()
         while in_flight:

@@ -27,7 +27,12 @@ from dataclasses import dataclass
 STRATEGIES = ("uniform", "cosine", "bsdf", "light", "mis", "ris")
 # What ``compare`` runs when no strategies are named: the five classic ones (``ris`` is asked for).
 CLASSIC_STRATEGIES = STRATEGIES[:5]
-HEURISTICS = ("balance", "power", "max")
+HEURISTICS = ("balance", "power", "max", "optimal")
+# The classic heuristics of Veach's thesis; ``optimal`` (``tracer.tuning``) learns its weights.
+CLASSIC_HEURISTICS = HEURISTICS[:3]
+# How the light and BSDF samples of mis are split (``tracer.tuning``): the counts given, or per
+# pixel from what earlier passes measured.
+ALLOCATIONS = ("fixed", "adaptive")
 LIGHT_SELECTIONS = ("power", "uniform", "bvh")
 # Where ris's candidates come from (``Strategy.ris``): light samples only, or both techniques.
 RIS_SOURCES = ("light", "light+bsdf")
@@ -45,8 +50,10 @@ class Strategy:
     """How to estimate direct light: a strategy name and its sample counts.
 
     name : one of ``STRATEGIES``.
-    heuristic : the MIS heuristic (``balance``, ``power`` with beta = 2, ``max``); used by ``mis``,
-        and by ``ris`` to weight candidates from two techniques.
+    heuristic : the MIS heuristic (``balance``, ``power`` with beta = 2, ``max``, or ``optimal``:
+        the balance heuristic plus a control variate whose coefficient each pixel learns from
+        earlier passes, ``tracer.tuning``); used by ``mis``, and by ``ris`` (not ``optimal``) to
+        weight candidates from two techniques.
     light_samples : light samples per camera sample; used by ``light`` and ``mis`` (``ris``:
         light candidates).
     bsdf_samples : direction samples per camera sample; used by ``uniform``, ``cosine``,
@@ -58,6 +65,9 @@ class Strategy:
     light_sampling : how a point or direction on the chosen light is drawn (``area``,
         ``solid-angle``, ``solid-angle-cos``); used by ``light`` and ``mis`` (whose BSDF samples
         are weighted with its pdf).
+    allocation : ``fixed`` (the counts above) or ``adaptive`` (mis only: each pixel splits the
+        same number of samples between the techniques as earlier passes say is best,
+        ``tracer.tuning``).
 
     Raises ``ValueError`` with a message naming the bad field.
     """
@@ -69,6 +79,7 @@ class Strategy:
     one_sample: bool = False
     light_selection: str = "power"
     light_sampling: str = DEFAULT_LIGHT_SAMPLING
+    allocation: str = "fixed"
 
     def __post_init__(self) -> None:
         if self.name not in STRATEGIES:
@@ -89,6 +100,16 @@ class Strategy:
             raise ValueError(f"strategy {self.name!r} with these counts takes no samples")
         if self.name == "ris" and self.light_samples == 0:
             raise ValueError("ris needs light_samples >= 1 (light candidates)")
+        if self.allocation not in ALLOCATIONS:
+            raise ValueError(f"unknown allocation {self.allocation!r}; expected one of "
+                             f"{', '.join(ALLOCATIONS)}")
+        if self.allocation == "adaptive" and not (self.name == "mis" and self.light_samples
+                                                  and self.bsdf_samples):
+            raise ValueError("adaptive allocation splits samples between light and BSDF sampling: it needs "
+                             "the mis strategy with light_samples >= 1 and bsdf_samples >= 1")
+        if self.name == "ris" and self.heuristic == "optimal" and self.bsdf_samples:
+            raise ValueError("ris cannot use the optimal heuristic: its weights may be negative, and ris "
+                             "resamples in proportion to them (use balance, power or max)")
 
     @classmethod
     def ris(cls, candidates: int = DEFAULT_RIS_CANDIDATES, sources: str = "light", **options) -> "Strategy":
@@ -112,8 +133,9 @@ class Strategy:
             selection += f", {self.light_sampling} light sampling"
         if self.name == "mis":
             mode = "one-sample, " if self.one_sample else ""
+            split = ", adaptive allocation" if self.adaptive else ""
             return (f"mis ({mode}{self.heuristic}, {self.light_samples} light + {self.bsdf_samples} bsdf"
-                    f"{selection})")
+                    f"{split}{selection})")
         if self.name == "ris":
             mix = f", {self.heuristic}" if self.bsdf_samples else ""
             sources = f"{self.light_samples} light + {self.bsdf_samples} bsdf" if self.bsdf_samples \
@@ -135,6 +157,8 @@ class Strategy:
                 parts.append(f"l{self.light_samples}_b{self.bsdf_samples}")
             if self.one_sample:
                 parts.append("one-sample")
+            if self.adaptive:
+                parts.append("adaptive")
         elif self.name == "ris":
             parts.append(f"l{self.light_samples}_b{self.bsdf_samples}" if self.bsdf_samples
                          else f"m{self.light_samples}")
@@ -172,6 +196,19 @@ class Strategy:
     def recorded_light_sampling(self) -> str:
         """The light sampling as records state it: ``none`` unless the strategy takes light samples."""
         return self.light_sampling if self.light_count else "none"
+
+    @property
+    def adaptive(self) -> bool:
+        """Each pixel chooses its own split of light and BSDF samples (``tracer.tuning``)."""
+        return self.allocation == "adaptive"
+
+    @property
+    def learns_control_variate(self) -> bool:
+        """Optimal MIS with several samples per technique: the estimator adds a control variate
+        whose coefficient is learned per pixel (``tracer.tuning``). With one-sample MIS the
+        balance heuristic is already optimal, so there is nothing to learn."""
+        return self.name == "mis" and self.heuristic == "optimal" and not self.one_sample_mis \
+            and self.light_count > 0 and self.direction_count > 0
 
     @property
     def one_sample_mis(self) -> bool:

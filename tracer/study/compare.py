@@ -140,8 +140,8 @@ EXTRAPOLATION_LIMIT = 4.0
 
 def method_name(strategy: Strategy, sampler: str = DEFAULT_SAMPLER) -> str:
     """A file-name-safe label of a strategy and sampler: ``mis``, ``mis_l3_b1``, ``light_x4``,
-    ``light_solid-angle``, ``mis_bvh-lights``, ``ris_m16``, ``mis_sobol`` ... (the defaults are
-    left out)."""
+    ``mis_optimal_adaptive``, ``light_solid-angle``, ``mis_bvh-lights``, ``ris_m16``,
+    ``mis_sobol`` ... (the defaults are left out)."""
     count = strategy.light_count or strategy.direction_count
     if strategy.name == "mis" and (strategy.light_samples, strategy.bsdf_samples) != (1, 1):
         name = f"mis_l{strategy.light_samples}_b{strategy.bsdf_samples}"
@@ -150,6 +150,10 @@ def method_name(strategy: Strategy, sampler: str = DEFAULT_SAMPLER) -> str:
             else f"ris_m{strategy.light_samples}"
     else:
         name = strategy.name if count == 1 else f"{strategy.name}_x{count}"
+    if strategy.name == "mis" and strategy.heuristic != "power":
+        name += f"_{strategy.heuristic}"
+    if strategy.adaptive:
+        name += "_adaptive"
     if strategy.light_count and strategy.light_sampling != DEFAULT_LIGHT_SAMPLING:
         name += f"_{strategy.light_sampling}"
     if strategy.light_count and strategy.light_selection != "power":
@@ -238,14 +242,17 @@ class Comparison:
         self._warm.add(strategy)
 
     def _render(self, strategy: Strategy, settings: RenderSettings, film: Film | None,
-                estimator: DirectLighting, progress: bool = False) -> tuple[RenderResult, float, float]:
-        """One render; an interrupted one stops the comparison (module docstring). Returns the
-        result, its seconds on the comparison's clock and its process CPU seconds (all threads)."""
+                estimator: DirectLighting, progress: bool = False,
+                continues: RenderResult | None = None) -> tuple[RenderResult, float, float]:
+        """One render, continuing the render ``continues`` (its film is ``film``; an estimator
+        that learns goes on from what it learned); an interrupted one stops the comparison
+        (module docstring). Returns the result, its seconds on the comparison's clock and its
+        process CPU seconds (all threads)."""
         if self.clock == "cpu":
             self._warm_up(strategy)
         start = time.process_time()
         result = render_complete(self.scene, strategy, settings, film=film, estimator=estimator,
-                                 progress=progress)
+                                 progress=progress, learner=continues.learner if continues else None)
         cpu = time.process_time() - start
         return result, (cpu if self.clock == "cpu" else result.seconds), cpu
 
@@ -286,6 +293,7 @@ class Comparison:
         estimator = self._estimator(strategy)
         film, spent, spp, nonfinite, per_spp = None, 0.0, 0, 0, None
         wall, cpu = 0.0, 0.0
+        result = None
         while True:
             left = budget - spent
             if per_spp is None:
@@ -296,7 +304,7 @@ class Comparison:
                 chunk = max(1, int(0.5 * left / per_spp)) if left > 2 * per_spp else 1
             settings = RenderSettings(spp=chunk, seed=self.seed, threads=self.threads, first_sample=spp,
                                       sampler=sampler)
-            result, seconds, chunk_cpu = self._render(strategy, settings, film, estimator)
+            result, seconds, chunk_cpu = self._render(strategy, settings, film, estimator, continues=result)
             film, spp = result.film, spp + chunk
             spent += seconds
             wall += result.seconds
@@ -323,10 +331,11 @@ class Comparison:
         points: list[dict[str, Any]] = []
         film, spp, spent = None, 0, 0.0
         target = 1
+        result = None
         while (max_spp is None or target <= max_spp):
             settings = RenderSettings(spp=target - spp, seed=seed, threads=self.threads, first_sample=spp,
                                       sampler=sampler)
-            result, seconds, _ = self._render(strategy, settings, film, estimator)
+            result, seconds, _ = self._render(strategy, settings, film, estimator, continues=result)
             film, spp = result.film, target
             spent += seconds
             rel = metrics.relmse(film.mean, self.reference.mean, self.reference_variance)

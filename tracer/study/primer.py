@@ -710,26 +710,79 @@ def mis_sample2(u: np.ndarray) -> np.ndarray:
     return MIS_C + MIS_G2 * np.tan(lo + u * (hi - lo))
 
 
-def _constant(value: float) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    return lambda p1, p2: np.full_like(p1, value)
+def _constant(value: float) -> Callable[..., np.ndarray]:
+    return lambda p1, p2, f=None: np.full_like(p1, value)
 
 
-def _heuristic(beta: float, mine: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+def _heuristic(beta: float, mine: int) -> Callable[..., np.ndarray]:
     """w_i = p_i^beta / (p1^beta + p2^beta): beta = 1 balance, 2 power (Veach 1997, section
     9.2). Equal sample counts here, so the count scaling of the multi-sample model cancels."""
-    return lambda p1, p2: (p1, p2)[mine] ** beta / (p1**beta + p2**beta)
+    return lambda p1, p2, f=None: (p1, p2)[mine] ** beta / (p1**beta + p2**beta)
 
 
-def _max_normalised(mine: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+def _max_normalised(mine: int) -> Callable[..., np.ndarray]:
     """A plausible mistake: w_i = p_i / max(p1, p2). Each weight is in [0, 1] but they sum to
     1 + min/max > 1, so the estimator counts the overlap twice."""
-    return lambda p1, p2: (p1, p2)[mine] / np.maximum(p1, p2)
+    return lambda p1, p2, f=None: (p1, p2)[mine] / np.maximum(p1, p2)
+
+
+def optimal_alpha(counts: tuple[int, int] = (1, 1), panels: int = 4000) -> np.ndarray:
+    """The variance-optimal a = A^-1 b of Kondapaneni et al. 2019 for f and (p1, p2) with
+    ``counts`` samples, by quadrature: A_ik = int p_i p_k / q, b_i = int f p_i / q, q = sum_j
+    n_j p_j."""
+    x, w = gauss_legendre(0.0, 1.0, panels)
+    p = np.stack([mis_p1(x), mis_p2(x)])
+    q = counts[0] * p[0] + counts[1] * p[1]
+    a = np.einsum("ix,kx,x->ik", p, p, w / q)
+    b = np.einsum("ix,x->i", p, w * mis_f(x) / q)
+    return np.linalg.solve(a, b)
+
+
+def _optimal(mine: int, alpha: np.ndarray, counts: tuple[int, int] = (1, 1)) -> Callable[..., np.ndarray]:
+    """Kondapaneni et al.'s weights w_i = a_i p_i / f + (n_i p_i / q)(1 - (a . p) / f): they
+    sum to one for any a (so the estimator is unbiased for any a), and the a of
+    :func:`optimal_alpha` minimizes the variance. A weight may be negative or above 1."""
+    def weight(p1, p2, f):
+        p = (p1, p2)
+        q = counts[0] * p1 + counts[1] * p2
+        share = alpha[0] * p1 + alpha[1] * p2
+        return alpha[mine] * p[mine] / f + counts[mine] * p[mine] / q * (1.0 - share / f)
+    return weight
+
+
+def control_variate_alpha(alpha: np.ndarray, counts: tuple[int, int] = (1, 1)) -> float:
+    """The one coefficient a_1 - (n_1 / n_2) a_2 that matters: adding lambda n to a changes no
+    weight, so optimal MIS is the balance heuristic's V plus (a_1 - n_1 a_2 / n_2) C, with the
+    zero-mean control variate C of ``tracer.tuning``."""
+    return float(alpha[0] - counts[0] * alpha[1] / counts[1])
+
+
+def learned_alpha(rng: np.random.Generator, pilot: int) -> tuple[float, float]:
+    """a learned as the renderer learns it (``tracer.tuning.control_coefficient``) from
+    ``pilot`` independent draws of one sample per technique: the balance estimate V and the
+    control variate C = (1 - p1/q)(X1) - (p1/q)(X2), q = p1 + p2, per draw. Returns a and the
+    standard error of a regression slope, sqrt(Var(V + a C) / (pilot Var(C)))."""
+    from .. import tuning
+
+    x1, x2 = mis_sample1(rng.random(pilot)), mis_sample2(rng.random(pilot))
+    share1 = mis_p1(x1) / (mis_p1(x1) + mis_p2(x1))
+    share2 = mis_p1(x2) / (mis_p1(x2) + mis_p2(x2))
+    v = mis_f(x1) / (mis_p1(x1) + mis_p2(x1)) + mis_f(x2) / (mis_p1(x2) + mis_p2(x2))
+    c = (1.0 - share1) - share2
+    sums = np.zeros((1, 1, tuning.SUM_COLUMNS))
+    row = sums[0, 0]
+    row[tuning.COUNT], row[tuning.CONTROL], row[tuning.SUM_CC] = pilot, c.sum(), (c * c).sum()
+    row[tuning.SUM_V:tuning.SUM_V + 3] = v.sum()
+    row[tuning.SUM_VV:tuning.SUM_VV + 3] = (v * v).sum()
+    row[tuning.SUM_VC:tuning.SUM_VC + 3] = (v * c).sum()
+    alpha = float(tuning.control_coefficient(sums, np.zeros((0, 1)), 1.0, False)[0, 0, 0])
+    return alpha, math.sqrt(np.var(v + alpha * c) / (pilot * np.var(c)))
 
 
 @dataclass(frozen=True)
 class MisEstimator:
     """F = sum_i (1/n_i) sum_j w_i(X_ij) f(X_ij) / p_i(X_ij), X_ij ~ p_i (Veach 1997, eq. 9.4),
-    with n = (n1, n2) samples; weights take (p1(x), p2(x)) arrays and return w_i(x)."""
+    with n = (n1, n2) samples; weights take (p1(x), p2(x), f(x)) arrays and return w_i(x)."""
 
     name: str
     counts: tuple[int, int]
@@ -747,6 +800,9 @@ MIS_ESTIMATORS = (
     MisEstimator(f"power heuristic, beta = {POWER_BETA:g}", (1, 1),
                  (_heuristic(POWER_BETA, 0), _heuristic(POWER_BETA, 1))),
 )
+OPTIMAL_NAME = "optimal (a = A^-1 b by quadrature)"
+LEARNED_NAME = "optimal, a learned from a pilot"
+MIS_PILOT = 2000  # pilot draws behind the learned a
 
 
 def mis_estimates(rng: np.random.Generator, est: MisEstimator, trials: int) -> np.ndarray:
@@ -756,7 +812,8 @@ def mis_estimates(rng: np.random.Generator, est: MisEstimator, trials: int) -> n
         for _ in range(count):
             x = sample(rng.random(trials))
             p1, p2 = mis_p1(x), mis_p2(x)
-            total += est.weights[i](p1, p2) * mis_f(x) / (count * (p1, p2)[i])
+            f = mis_f(x)
+            total += est.weights[i](p1, p2, f) * f / (count * (p1, p2)[i])
     return total
 
 
@@ -775,7 +832,7 @@ def mis_exact(est: MisEstimator, panels: int = 4000) -> dict[str, float]:
     for i, count in enumerate(est.counts):
         if count == 0:
             continue
-        h = est.weights[i](*p) * f / (count * p[i])
+        h = est.weights[i](*p, f) * f / (count * p[i])
         m = float((w * p[i] * h).sum())
         means += [m] * count
         variances += [float((w * p[i] * (h - m) ** 2).sum())] * count
@@ -786,15 +843,32 @@ def mis_exact(est: MisEstimator, panels: int = 4000) -> dict[str, float]:
             "mu4": sum(mu4s) + 3.0 * (var**2 - sum(v * v for v in variances))}
 
 
+def mis_estimators(rng: np.random.Generator) -> tuple[tuple[MisEstimator, ...], dict[str, float]]:
+    """``MIS_ESTIMATORS`` plus optimal MIS twice: with the a of :func:`optimal_alpha`, and
+    with a learned from a pilot of ``MIS_PILOT`` draws (independent of the trials, so
+    the estimator stays unbiased); and the numbers behind them: the optimal a (2,), its
+    control-variate coefficient, and the learned one with its standard error."""
+    alpha = optimal_alpha()
+    learned, learned_se = learned_alpha(rng, MIS_PILOT)
+    as_pair = np.array([learned, 0.0])  # a_2 = 0: the same estimator (control_variate_alpha)
+    extra = (MisEstimator(OPTIMAL_NAME, (1, 1), (_optimal(0, alpha), _optimal(1, alpha))),
+             MisEstimator(LEARNED_NAME, (1, 1), (_optimal(0, as_pair), _optimal(1, as_pair))))
+    return MIS_ESTIMATORS + extra, {"alpha": alpha, "cv_alpha": control_variate_alpha(alpha),
+                                    "learned_alpha": learned, "learned_alpha_se": learned_se}
+
+
 def mis(rng: np.random.Generator, out_dir: Path | None = None, trials: int = 200_000) -> Result:
-    """Exercise 4: seven ways to combine two samples (one per pdf, or two from one pdf) into an
+    """Exercise 4: nine ways to combine two samples (one per pdf, or two from one pdf) into an
     estimate of int_0^1 f, each run ``trials`` times: mean, bias and variance against exact.
+    The last two are optimal MIS (Kondapaneni et al. 2019), with its a from quadrature and
+    learned from a pilot as the renderer learns it.
 
     numbers: ``trials``, ``I``, ``rows`` {name: {"estimates": (trials,), "mean", "bias",
-    "var", "mu4" (exact), "weight_sum_is_one" (bool)}}.
+    "var", "mu4" (exact), "weight_sum_is_one" (bool)}}, ``optimal`` (``mis_estimators``).
     """
     rows, table = {}, []
-    for est in MIS_ESTIMATORS:
+    estimators, optimal = mis_estimators(rng)
+    for est in estimators:
         values = mis_estimates(rng, est, trials)
         exact = mis_exact(est)
         unit = abs(exact["bias"]) < 1e-9 * MIS_I
@@ -814,9 +888,16 @@ def mis(rng: np.random.Generator, out_dir: Path | None = None, trials: int = 200
         f"{trials} trials of 2 samples",
         "Weights summing to one (constants or functions) are unbiased, other sums are biased "
         "by integral (w1 + w2 - 1) f; balance and power heuristics have a fraction of the "
-        "variance of either pdf alone, which each fail where the other is good.",
-        {"estimators of the same integral, 2 samples each (z: measured - exact in SEs)": table},
-        {"trials": trials, "I": MIS_I, "rows": rows})
+        "variance of either pdf alone, which each fail where the other is good. Optimal MIS "
+        "(weights that may be negative: the balance heuristic plus a control variate) has the "
+        "least variance of all, also with its coefficient learned from a pilot.",
+        {"estimators of the same integral, 2 samples each (z: measured - exact in SEs)": table,
+         "optimal MIS's coefficient a_1 - a_2 (the control variate's; z: learned - exact)": [
+             {"a": "A^-1 b by quadrature", "value": optimal["cv_alpha"], "SE": "", "z": ""},
+             {"a": f"learned from {MIS_PILOT} pilot draws", "value": optimal["learned_alpha"],
+              "SE": optimal["learned_alpha_se"],
+              "z": z_score(optimal["learned_alpha"], optimal["cv_alpha"], optimal["learned_alpha_se"])}]},
+        {"trials": trials, "I": MIS_I, "rows": rows, "optimal": optimal})
     if out_dir is not None:
         result.figure = _mis_figure(result, Path(out_dir))
     return result
@@ -841,8 +922,9 @@ def _mis_figure(result: Result, out_dir: Path) -> Path:
 
     ax = axes[0, 1]
     for (name, w1, color) in (("balance w1", _heuristic(1.0, 0), "#2ca02c"),
-                              ("power w1", _heuristic(POWER_BETA, 0), "#9467bd")):
-        ax.plot(x, w1(p1, p2), color=color, lw=1.5, label=f"{name} (w2 = 1 − w1)")
+                              ("power w1", _heuristic(POWER_BETA, 0), "#9467bd"),
+                              ("optimal w1", _optimal(0, result.numbers["optimal"]["alpha"]), "#8c564b")):
+        ax.plot(x, w1(p1, p2, mis_f(x)), color=color, lw=1.5, label=f"{name} (w2 = 1 − w1)")
     ax.plot(x, _max_normalised(0)(p1, p2) + _max_normalised(1)(p1, p2), color="#ff7f0e", lw=1.5,
             label="p_i / max: w1 + w2 (should be 1)")
     ax.axhline(1.0, color="k", lw=0.6, ls=":")

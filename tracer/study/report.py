@@ -113,6 +113,26 @@ def save_map(values: np.ndarray, path: Path, title: str, label: str, cmap: str =
     return save_figures(fig, path, formats)
 
 
+def learned_maps(run: Run, out: Path, formats: tuple[str, ...] = ("png",)) -> list[list[str]]:
+    """Maps of what a render learned between passes (``tracer.tuning``): the share of light
+    samples (adaptive allocation) and the control variate's coefficient, mean of RGB (optimal
+    MIS); returns the files of each figure written (none for a render that learned nothing)."""
+    name, film = run_name(run), run.film
+    shape = (film.height, film.width)
+    figures = []
+    if "allocation.light" in film.learned:
+        share = film.learned["allocation.light"].reshape(shape)
+        figures.append(save_map(share, out / f"{name}_allocation.png",
+                          f"{name}: share of light samples", "light / (light + BSDF)", cmap="coolwarm",
+                          vmin=0.0, vmax=1.0, formats=formats))
+    if "alpha.R" in film.learned:
+        alpha = np.mean([film.learned[f"alpha.{c}"] for c in "RGB"], axis=0).reshape(shape)
+        limit = float(np.quantile(np.abs(alpha), 0.99)) or 1.0
+        figures.append(save_map(alpha, out / f"{name}_alpha.png", f"{name}: control-variate coefficient",
+                                "a (mean of RGB)", cmap="PuOr", vmin=-limit, vmax=limit, formats=formats))
+    return figures
+
+
 def relerr_map(run: Run, reference: Film, path: Path, formats: tuple[str, ...] = ("png",)) -> list[str]:
     """False-colour map of log10 relative squared error (channel mean), fixed range for all."""
     rel = metrics.relative_squared_error(run.film.image(), reference.image()).mean(axis=2)
@@ -560,6 +580,9 @@ def efficiency_pairs(runs: list[Run]) -> list[tuple[Run, Run]]:
     and sampler of a strategy against its first (where solid angle beats area sampling, or
     Sobol points independent ones, and where not)."""
     first: dict[str, Run] = {}
+    for r in runs:  # a strategy's run with the default settings (mis: power, fixed), else its first
+        if run_name(r) == r.strategy.name:
+            first[r.strategy.name] = r
     for r in runs:
         first.setdefault(r.strategy.name, r)
     pairs = [(first[a], first[b]) for a, b in (("bsdf", "light"), ("mis", "light"), ("mis", "bsdf"))
@@ -592,6 +615,10 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
         results.append(result_row(run, flip))
     images["Relative squared error"] = relerr_files
     images["FLIP perceptual error"] = flip_files
+    learned_files = [figure for run in runs for figure in learned_maps(run, out, formats)]
+    if learned_files:
+        images["What the learning renders learned (allocation: share of light samples; optimal MIS: "
+               "the control variate's coefficient)"] = learned_files
 
     wins = []
     ratio_files = []
