@@ -106,8 +106,7 @@ def figure(result: dict, path: Path) -> None:
     im = axes[2].imshow(alpha, vmin=-limit, vmax=limit, cmap="PuOr", interpolation="nearest")
     axes[2].set_title("optimal MIS: control-variate coefficient a (mean RGB)", fontsize=9)
     fig.colorbar(im, ax=axes[2], fraction=0.046, pad=0.04)
-    err = [metrics.relative_squared_error(r.film.image(), reference.image()).mean(axis=2)
-           for r in (learned, power)]
+    err = [metrics.relative_squared_error(r.film.image(), reference.image()) for r in (learned, power)]
     ratio = metrics.efficiency_ratio_map(err[0], learned.seconds, err[1], power.seconds)
     im = axes[3].imshow(ratio, vmin=-4, vmax=4, cmap="RdBu", interpolation="nearest")
     axes[3].set_title("log2 efficiency: optimal + adaptive (blue) vs power (red), equal time", fontsize=9)

@@ -708,3 +708,28 @@ def test_slope_marks_tell_heavy_tails_from_faster_than_monte_carlo():
     assert report.slope_text(plain).endswith("]")
     assert report._slope_notes([fast]) == [report.FAST_NOTE]
     assert report._slope_notes([heavy, plain]) == [report.HEAVY_TAIL_NOTE]
+
+
+def test_compare_takes_heuristics_and_allocations(tmp_path):
+    """--heuristic power,optimal --allocation fixed,adaptive runs mis four times (named apart,
+    with heuristic and allocation columns), ris with the classic heuristic, maps what the
+    learning runs learned, and pairs each mis run against the power heuristic's in an
+    efficiency map. Optimal MIS cannot weight ris (negative weights): asking only for it with
+    ris is refused."""
+    scene, ref = small_reference(tmp_path)
+    out = tmp_path / "cmp"
+    assert main(["compare", scene, "--reference", str(ref), "--spp", "48", "--out", str(out), "--quiet",
+                 "--strategies", "mis,ris", "--ris-sources", "light+bsdf", "--ris-candidates", "2",
+                 "--heuristic", "power,optimal", "--allocation", "fixed,adaptive"]) == 0
+    rows = {r["name"]: r for r in json.loads((out / "metrics.json").read_text())["results"]}
+    assert set(rows) == {"mis", "mis_adaptive", "mis_optimal", "mis_optimal_adaptive", "ris_l1_b1"}
+    assert (rows["mis_optimal_adaptive"]["heuristic"], rows["mis_optimal_adaptive"]["allocation"]) == \
+        ("optimal", "adaptive")
+    assert rows["ris_l1_b1"]["heuristic"] == "power"
+    assert read_exr(out / "mis_optimal_adaptive.exr").record.allocation == "adaptive"
+    for name in ("mis_adaptive_allocation", "mis_optimal_alpha", "mis_optimal_adaptive_allocation",
+                 "mis_optimal_adaptive_alpha", "efficiency_mis_optimal_adaptive_vs_mis"):
+        assert (out / f"{name}.png").is_file(), name
+    assert not (out / "mis_allocation.png").exists()
+    assert main(["compare", scene, "--reference", str(ref), "--spp", "2", "--out", str(out), "--quiet",
+                 "--strategies", "ris", "--ris-sources", "light+bsdf", "--heuristic", "optimal"]) == 2

@@ -242,7 +242,8 @@ def test_allocation_pools_each_pixel_with_its_neighbours():
     rng = np.random.default_rng(0)
     height, width = 9, 13
     sums = rng.random((height * width, 2, 5))
-    boxed = tuning._box_sum(sums, height, width, tuning.NEIGHBOURS).reshape(height, width, 2, 5)
+    boxed = tuning._box_sum(sums, height, width, tuning.NEIGHBOURS, np.empty_like(sums),
+                            np.empty_like(sums)).reshape(height, width, 2, 5)
     image = sums.reshape(height, width, 2, 5)
     r = tuning.NEIGHBOURS
     for y in range(height):

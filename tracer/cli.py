@@ -740,7 +740,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
     selections = args.light_selection
     # mis runs every heuristic with every allocation; ris weighs its candidates with the first
     # classic heuristic given (optimal weights can be negative).
-    classic = [h for h in args.heuristic if h in CLASSIC_HEURISTICS] or ["power"]
+    classic = [h for h in args.heuristic if h in CLASSIC_HEURISTICS]
+    if not classic and "ris" in names and "light+bsdf" in args.ris_sources:
+        raise InputError("--heuristic: ris weights its light and BSDF candidates with balance, power or max "
+                         "(optimal weights may be negative); add one of them to the list", "command line")
+    classic = classic or ["power"]
 
     def weightings(name):
         if name == "mis":

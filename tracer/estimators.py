@@ -304,6 +304,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
     shadow_other, shadow_control, shadow_v2, shadow_t = shadow.other, shadow.control, shadow.v2, shadow.t
     light_count, replicates, groups = tuned.light_count, tuned.replicates, tuned.groups
     learning = len(lane_stats) > 0
+    counting = learning and tuned.collect
     n_light, n_dir = float(plan.n_light), float(plan.n_dir)
     n_shadow = 0
     n_direction = 0
@@ -312,7 +313,10 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         if plan.ris:
             weight_sum[lane] = 0.0
         if learning:
-            lane_stats[lane, :] = 0.0
+            if tuned.collect:
+                lane_stats[lane, :] = 0.0
+            else:  # only C is read (optimal MIS applies a C)
+                lane_stats[lane, tuning.CONTROL] = 0.0
         p = prim[lane]
         if p < 0:
             continue
@@ -361,7 +365,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         else:
             lights_here, dirs_here = plan.n_light, plan.n_dir
             own_light, own_dir = n_light, n_dir
-        if learning:
+        if counting:
             lane_stats[lane, tuning.LIGHT_TAKEN] = lights_here
             lane_stats[lane, tuning.DIRECTION_TAKEN] = dirs_here
 
@@ -407,7 +411,8 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
                 shadow_control[n_shadow] = (1.0 - w_balance) / own_light
                 shadow_v2[n_shadow] = _mean_square(raw, w_balance)
                 shadow_t[n_shadow] = share_t
-                lane_stats[lane, tuning.LIGHT_RAYS] += 1.0
+                if counting:
+                    lane_stats[lane, tuning.LIGHT_RAYS] += 1.0
             n_shadow = _put(shadow_origin, shadow_dir, shadow_value, shadow_lane, n_shadow,
                             origin, to_target, value, lane)
 
@@ -429,7 +434,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
             dir_pdf[n_direction] = own_dir * pdf_dir
             dir_delta[n_direction] = delta
             dir_other[n_direction] = own_light
-            if learning:
+            if counting:
                 lane_stats[lane, tuning.DIRECTION_RAYS] += 1.0
             for axis in range(3):
                 dir_point[n_direction, axis] = x[axis]
@@ -499,7 +504,8 @@ def _gather(radiance, surfaces: Surfaces, light_tables, plan: Plan, tuned: Tunin
     estimator that learns adds what these samples tell to ``lane_stats`` (``tracer.tuning``)."""
     shadow_value, shadow_lane = shadow.value, shadow.lane
     shadow_other, shadow_control, shadow_v2, shadow_t = shadow.other, shadow.control, shadow.v2, shadow.t
-    learning, collect = len(lane_stats) > 0, tuned.collect
+    # The second moments per share are what the allocation learns from: not for optimal MIS alone.
+    learning, collect = len(lane_stats) > 0, tuned.collect and plan.adaptive
     shares = tuned.shares
     for row in range(len(blocked)):
         if not blocked[row]:

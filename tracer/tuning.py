@@ -170,6 +170,7 @@ class Learner:
         self.pilot_light = float(light_samples)
         self.optimal, self.adaptive = optimal, adaptive
         self.sums = np.zeros((pixels, self.groups, SUM_COLUMNS))
+        self._scratch: tuple[np.ndarray, np.ndarray] | None = None  # for _box_sum
 
     def add(self, first_pixel: int, block: np.ndarray) -> None:
         """Add a batch's per-pixel sums ``(npix, G, SUM_COLUMNS)`` (``reduce_lanes``)."""
@@ -180,8 +181,12 @@ class Learner:
         their statistics are wanted."""
         swap = self.groups == 2  # each group learns from the other
         light_count = np.zeros((0, 1))
+        if not self.sums[:, :, COUNT].any():  # nothing learned yet: the pilot's settings
+            return Tuning(light_count, np.zeros((0, 1, 3)), SHARES, self.groups, self.replicates, collect)
         if self.adaptive:
-            pooled = _box_sum(self.sums, self.height, self.width, NEIGHBOURS)
+            if self._scratch is None:
+                self._scratch = (np.empty_like(self.sums), np.empty_like(self.sums))
+            pooled = _box_sum(self.sums, self.height, self.width, NEIGHBOURS, *self._scratch)
             light_count = best_light_count(pooled, SHARES, self.total, self.pilot_light, swap)
         alpha = np.zeros((0, 1, 3))
         if self.optimal:
@@ -193,12 +198,15 @@ class Learner:
         ``allocation.light`` the share of light samples a next pass would take (adaptive),
         ``alpha.R/G/B`` the control variate's coefficient (optimal); averaged over the groups."""
         tuned = self.tuning()
+        pixels = len(self.sums)
         out = {}
         if self.adaptive:
-            out["allocation.light"] = tuned.light_count.mean(axis=1) / self.total
+            out["allocation.light"] = tuned.light_count.mean(axis=1) / self.total if len(tuned.light_count) \
+                else np.full(pixels, self.pilot_light / self.total)
         if self.optimal:
             for ch, name in enumerate("RGB"):
-                out[f"alpha.{name}"] = tuned.alpha[:, :, ch].mean(axis=1)
+                out[f"alpha.{name}"] = tuned.alpha[:, :, ch].mean(axis=1) if len(tuned.alpha) \
+                    else np.zeros(pixels)
         return out
 
 
@@ -269,23 +277,33 @@ def best_light_count(sums, shares, total: float, pilot_light: float, swap: bool)
 
 
 @jit
-def _box_sum(sums, height: int, width: int, radius: int):
+def _box_sum(sums, height: int, width: int, radius: int, rows, out):
     """Each pixel's sums ``(P, G, W)`` added over the (2 radius + 1)^2 pixels around it
-    (clipped at the image's edges): along rows, then along columns."""
-    return _window_sum(_window_sum(sums, height, width, radius, True), height, width, radius, False)
+    (clipped at the image's edges), into ``out`` (same shape; ``rows`` is scratch space of that
+    shape: arrays kept between calls, since fresh pages cost more than the sums here): running
+    sums along rows, then down columns, in memory order (one add and one subtract per pixel and
+    pass, whatever the radius). Returns ``out``."""
+    for y in range(height):
+        _running_sum(sums[y * width:(y + 1) * width], rows[y * width:(y + 1) * width], width, radius)
+    image, boxed = rows.reshape(height, width * sums.shape[1], sums.shape[2]), \
+        out.reshape(height, width * sums.shape[1], sums.shape[2])
+    _running_sum(image, boxed, height, radius)
+    return out
 
 
 @jit
-def _window_sum(sums, height: int, width: int, radius: int, along_rows: bool):
-    """Each pixel's sums added over the 2 radius + 1 pixels around it in its row (or column)."""
-    out = np.zeros_like(sums)
-    for y in range(height):
-        for x in range(width):
-            target = out[y * width + x]
-            centre, length = (x, width) if along_rows else (y, height)
-            for i in range(max(0, centre - radius), min(length, centre + radius + 1)):
-                target += sums[y * width + i] if along_rows else sums[i * width + x]
-    return out
+def _running_sum(source, target, length: int, radius: int) -> None:
+    """target[i] = the sum of source[j] for |j - i| <= radius, 0 <= j < length, along the first
+    axis of ``source`` (the rest of its axes are added element by element)."""
+    running = np.zeros(source.shape[1:])
+    for i in range(-radius, length):
+        enter, leave = i + radius, i - radius - 1
+        if enter < length:
+            running += source[enter]
+        if leave >= 0:
+            running -= source[leave]
+        if i >= 0:
+            target[i] = running
 
 
 def warm_up() -> None:
@@ -293,7 +311,8 @@ def warm_up() -> None:
     render's clock does not count it (``render_loop._compile``)."""
     empty = np.zeros((1, 1, SUM_COLUMNS))
     control_coefficient(empty, np.zeros((0, 1)), 1.0, False)
-    best_light_count(_box_sum(empty, 1, 1, NEIGHBOURS), SHARES, 2.0, 1.0, False)
+    pooled = _box_sum(empty, 1, 1, NEIGHBOURS, np.empty_like(empty), np.empty_like(empty))
+    best_light_count(pooled, SHARES, 2.0, 1.0, False)
     apply_control(np.zeros((0, 3)), np.zeros((0, LANE_COLUMNS)), np.zeros((0, 1, 3)), 0, 1, 0, 1, 1)
 
 

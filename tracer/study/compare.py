@@ -596,6 +596,7 @@ def convergence_rows(points: list[dict[str, Any]], target: float,
 def run_row(run: Run) -> dict[str, object]:
     """The row of ``metrics.json``'s results for one run."""
     row: dict[str, object] = {"strategy": run.strategy.name, "heuristic": run.strategy.recorded_heuristic,
+                              "allocation": run.strategy.allocation,
                               "light_samples": run.strategy.light_count,
                               "bsdf_samples": run.strategy.direction_count,
                               "light_sampling": run.strategy.recorded_light_sampling,
