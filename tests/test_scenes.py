@@ -35,8 +35,11 @@ RIS_MIXED = Strategy.ris(4, "light+bsdf")
 # 160 spp is 5 passes (it learns after passes 1, 2 and 4); on the scenes with a point light, a
 # mirror (delta lobes, which add nothing to its control variate) and glossy plates (where the
 # split moves most).
+# One-sample MIS with adaptive allocation learns each pixel's probability of the light technique.
 LEARNED = Strategy("mis", "optimal", allocation="adaptive")
-LEARNED_SCENES = ("cornell", "veach_mis", "point_light", "near_mirror")
+ONE_SAMPLE_LEARNED = Strategy("mis", "balance", one_sample=True, allocation="adaptive")
+LEARNED_SCENES = {"cornell": [LEARNED], "veach_mis": [LEARNED, ONE_SAMPLE_LEARNED], "point_light": [LEARNED],
+                  "near_mirror": [LEARNED, ONE_SAMPLE_LEARNED]}
 LEARNED_SPP = 160
 
 # scene -> (strategies compared with MIS, spp); a name stands for Strategy(name).
@@ -54,7 +57,7 @@ AGREE = {
     "many_lights": ([Strategy("light", light_selection=BVH), RIS_LIGHT, RIS_MIXED], 16),
     "emissive_mesh": (["bsdf", Strategy("mis", light_selection=BVH), RIS_LIGHT], 16),
 }
-COMPARISONS = (sum(len(v[0]) for v in AGREE.values()) + len(LEARNED_SCENES)) * 3
+COMPARISONS = (sum(len(v[0]) for v in AGREE.values()) + sum(len(v) for v in LEARNED_SCENES.values())) * 3
 SIZE = 32
 
 
@@ -81,8 +84,7 @@ def test_strategies_agree_with_mis(name, mis_films):
     assert np.all(ref_mean > 0.0)
     level = sidak(COMPARISONS)
     runs = [(Strategy(s) if isinstance(s, str) else s, spp) for s in strategies]
-    if name in LEARNED_SCENES:
-        runs.append((LEARNED, LEARNED_SPP))
+    runs += [(strategy, LEARNED_SPP) for strategy in LEARNED_SCENES.get(name, [])]
     for i, (strategy, count) in enumerate(runs):
         film = render(scene, strategy, RenderSettings(spp=count, seed=2000 + i)).film
         mean, se = image_mean_and_se(film)

@@ -250,3 +250,20 @@ def test_allocation_pools_each_pixel_with_its_neighbours():
         for x in range(width):
             window = image[max(0, y - r):y + r + 1, max(0, x - r):x + r + 1].sum(axis=(0, 1))
             assert np.allclose(boxed[y, x], window), (y, x)
+
+
+def test_allocation_with_replicates_is_learned_once_from_the_pilot():
+    """With a replicate sampler, adaptive allocation learns from the pilot only and keeps it:
+    once a group has been rendered with counts learned from the other group's pilot, its sums
+    carry information about the other group's own points (tracer.tuning, Samplers with
+    replicates). Adding more sums changes nothing, and the renders stop collecting them."""
+    learner = tuning.Learner(16, 4, 8, 1.0, 2.0, True, True)
+    rng = np.random.default_rng(5)
+    learner.add(0, rng.random((16, 2, tuning.SUM_COLUMNS)) * 10)
+    first = learner.tuning()
+    assert learner.settled and not first.collect
+    learner.add(0, rng.random((16, 2, tuning.SUM_COLUMNS)) * 10)
+    assert learner.tuning() is first
+    independent = tuning.Learner(16, 4, 0, 1.0, 2.0, True, True)
+    independent.add(0, rng.random((16, 1, tuning.SUM_COLUMNS)) * 10)
+    assert not independent.settled and independent.tuning().collect

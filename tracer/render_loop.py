@@ -266,8 +266,10 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         bar = _progress_bar(cam.width * cam.height * settings.spp, progress)
         start = time.perf_counter()
         if estimator.learns and learner is None:
-            learner = tuning.Learner(cam.width * cam.height, cam.width, replicates, runs.light_count,
-                                     runs.direction_count, estimator.plan.optimal, estimator.plan.adaptive)
+            plan = estimator.plan
+            learner = tuning.Learner(cam.width * cam.height, cam.width, replicates,
+                                     plan.c_light if plan.one_sample else plan.n_light, plan.total,
+                                     plan.optimal, plan.adaptive)
         elif not estimator.learns:
             learner = None
         threads = max(1, settings.threads)
@@ -275,7 +277,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         passes = -(-settings.spp // k)
 
         def learns_before(batch: Batch) -> bool:
-            return learner is not None and relearns(batch, settings.first_sample, k)
+            return learner is not None and not learner.settled and relearns(batch, settings.first_sample, k)
 
         def learn(batch: Batch | None) -> tuning.Tuning:
             # Statistics are collected only while a later pass (or a render that continues

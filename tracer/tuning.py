@@ -83,7 +83,12 @@ camera samples is too few to rank 11 splits alone.
 within a replicate: what was learned from a replicate's earlier points could correlate with
 its later ones. So the replicates are split into two groups (even and odd) and each group's
 samples use what was learned from the other group only (cross-fitting): different replicates
-are independently randomized, so each pass stays exactly unbiased.
+are independently randomized, so each pass stays exactly unbiased. That holds for optimal
+MIS, whose coefficient changes how samples are weighted, not which are drawn. Adaptive
+allocation changes which are drawn: once the odd group has been rendered with counts learned
+from the even group's pilot, its sums carry information about the even group's own points,
+and learning from them again would break the independence. So with replicates the allocation
+(and the coefficient with it) is learned once, from the pilot pass, and kept.
 """
 
 from __future__ import annotations
@@ -160,17 +165,23 @@ class Learner:
     sums : (P, G, ``SUM_COLUMNS``) float64, G groups of replicates (module docstring).
     """
 
-    def __init__(self, pixels: int, width: int, replicates: int, light_samples: int, bsdf_samples: int,
+    def __init__(self, pixels: int, width: int, replicates: int, pilot_light: float, total: float,
                  optimal: bool, adaptive: bool):
+        """``pilot_light``: the expected light samples of a camera sample before anything is
+        learned (n_l, or c_l with one-sample MIS), ``total``: its technique samples N (1 with
+        one-sample MIS), as the estimator's plan has them."""
         self.width = width
         self.height = pixels // max(width, 1)
         self.replicates = max(1, replicates)
         self.groups = 2 if replicates > 1 else 1
-        self.total = float(light_samples + bsdf_samples)
-        self.pilot_light = float(light_samples)
+        self.total = float(total)
+        self.pilot_light = float(pilot_light)
         self.optimal, self.adaptive = optimal, adaptive
         self.sums = np.zeros((pixels, self.groups, SUM_COLUMNS))
         self._scratch: tuple[np.ndarray, np.ndarray] | None = None  # for _box_sum
+        # Adaptive allocation with replicates learns once, from the pilot (module docstring).
+        self.learns_once = adaptive and self.groups == 2
+        self._frozen: Tuning | None = None
 
     def add(self, first_pixel: int, block: np.ndarray) -> None:
         """Add a batch's per-pixel sums ``(npix, G, SUM_COLUMNS)`` (``reduce_lanes``)."""
@@ -179,6 +190,8 @@ class Learner:
     def tuning(self, collect: bool = True) -> Tuning:
         """What the next passes apply, from everything added so far; ``collect``: whether
         their statistics are wanted."""
+        if self._frozen is not None:
+            return self._frozen
         swap = self.groups == 2  # each group learns from the other
         light_count = np.zeros((0, 1))
         if not self.sums[:, :, COUNT].any():  # nothing learned yet: the pilot's settings
@@ -191,7 +204,15 @@ class Learner:
         alpha = np.zeros((0, 1, 3))
         if self.optimal:
             alpha = control_coefficient(self.sums, light_count, self.pilot_light, swap)
+        if self.learns_once:
+            self._frozen = Tuning(light_count, alpha, SHARES, self.groups, self.replicates, False)
+            return self._frozen
         return Tuning(light_count, alpha, SHARES, self.groups, self.replicates, collect)
+
+    @property
+    def settled(self) -> bool:
+        """Whether it has learned all it will (adaptive allocation with replicates)."""
+        return self._frozen is not None
 
     def maps(self) -> dict[str, np.ndarray]:
         """What the render learned, per pixel, as EXR channels ``(P,)`` for a user to look at:
@@ -321,7 +342,8 @@ def reduce_lanes(radiance, lane_stats, npix: int, k: int, first_sample: int, rep
                  groups: int):
     """(npix, G, SUM_COLUMNS) per-pixel sums of a batch's lanes (pixel-major, k samples each):
     ``radiance (n, 3)`` holds the balance estimates V, ``lane_stats (n, LANE_COLUMNS)`` the
-    rest. Lanes whose V or C is not finite are left out (the film counts them)."""
+    rest. Lanes whose V or statistics are not finite are left out (the film counts the former;
+    the latter would turn the neighbourhood sums of the allocation into NaN)."""
     out = np.zeros((npix, groups, SUM_COLUMNS))
     for row in range(npix):
         for j in range(k):
@@ -329,6 +351,11 @@ def reduce_lanes(radiance, lane_stats, npix: int, k: int, first_sample: int, rep
             c = lane_stats[lane, CONTROL]
             v = radiance[lane]
             if not (np.isfinite(c) and np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2])):
+                continue
+            finite = True
+            for col in range(LANE_COLUMNS):
+                finite = finite and np.isfinite(lane_stats[lane, col])
+            if not finite:
                 continue
             g = ((first_sample + j) % replicates) % groups
             for col in range(LANE_COLUMNS):
