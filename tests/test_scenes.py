@@ -32,14 +32,10 @@ BVH = "bvh"
 RIS_LIGHT = Strategy.ris(4, light_selection=BVH)
 RIS_MIXED = Strategy.ris(4, "light+bsdf")
 # Optimal MIS with adaptive allocation learns between passes: at 32 x 32 a pass is 32 spp, so
-# 160 spp is 5 passes (it learns after passes 1, 2 and 4); on the scenes with a point light, a
-# mirror (delta lobes, which add nothing to its control variate) and glossy plates (where the
-# split moves most).
-# One-sample MIS with adaptive allocation learns each pixel's probability of the light technique.
+# 160 spp is 5 passes (it learns after passes 1, 2 and 4). One-sample MIS with adaptive
+# allocation learns each pixel's probability of the light technique.
 LEARNED = Strategy("mis", "optimal", allocation="adaptive")
 ONE_SAMPLE_LEARNED = Strategy("mis", "balance", one_sample=True, allocation="adaptive")
-LEARNED_SCENES = {"cornell": [LEARNED], "veach_mis": [LEARNED, ONE_SAMPLE_LEARNED], "point_light": [LEARNED],
-                  "near_mirror": [LEARNED, ONE_SAMPLE_LEARNED]}
 LEARNED_SPP = 160
 
 # scene -> (strategies compared with MIS, spp); a name stands for Strategy(name).
@@ -57,6 +53,10 @@ AGREE = {
     "many_lights": ([Strategy("light", light_selection=BVH), RIS_LIGHT, RIS_MIXED], 16),
     "emissive_mesh": (["bsdf", Strategy("mis", light_selection=BVH), RIS_LIGHT], 16),
 }
+# Every shipped scene with optimal MIS and adaptive allocation; one-sample too where the
+# split matters most (glossy plates, a mirror).
+LEARNED_SCENES = {name: [LEARNED] for name in AGREE}
+LEARNED_SCENES["veach_mis"] = LEARNED_SCENES["near_mirror"] = [LEARNED, ONE_SAMPLE_LEARNED]
 COMPARISONS = (sum(len(v[0]) for v in AGREE.values()) + sum(len(v) for v in LEARNED_SCENES.values())) * 3
 SIZE = 32
 
