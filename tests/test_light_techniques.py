@@ -251,7 +251,13 @@ def on_the_quad(scene, s, pdf_of_direction, x: np.ndarray):
     return x + s.dist[:, None] * s.wi, pdf, domain
 
 
-@pytest.mark.parametrize("case, sampling", TESTS)
+# sphere-area takes 32 s: slow since tracer 0.7, for the CI budget (test_sampling's sphere case
+# samples sphere lights by area in every run).
+SLOW_TESTS = {("sphere", "area")}
+
+
+@pytest.mark.parametrize("case, sampling", [pytest.param(*t, marks=pytest.mark.slow) if t in SLOW_TESTS else t
+                                            for t in TESTS])
 def test_light_technique_chi2(case, sampling, tmp_path):
     """Directions of valid samples against pdf() of the first hit, on a cap around the light;
     invalid samples go to the rest cell, which expects N (1 - mass). The mass of valid samples
