@@ -396,6 +396,7 @@ HEAVY_SCENES = {
 }
 
 
+@pytest.mark.slow  # 9 s: slow since tracer 0.7, for the CI budget (.ci/run reached 15 minutes).
 def test_heavy_tailed_entry_is_refused_with_the_spp_it_needs(tmp_path, capsys):
     """Light sampling of the alpha 0.05 sphere under the large light at 16 x 16 and 8 spp:
     resampling the baseline's renders, the t-test of their image means against the reference
