@@ -356,7 +356,7 @@ def _shade(prim, origins, dirs, sampler, pixel, sample, surfaces: Surfaces, ligh
         if plan.one_sample or plan.adaptive:
             own_light = plan.c_light if plan.one_sample else n_light
             if plan.adaptive and len(light_count):
-                own_light = light_count[pixel[lane], (sample[lane] % replicates) % groups]
+                own_light = light_count[pixel[lane], tuning.group_of(sample[lane], replicates, groups)]
             own_dir = plan.total - own_light
             whole = math.floor(own_light)
             extra = samplers.uniform(sampler, state, dimensions.TECHNIQUE_CHOICE) < own_light - whole

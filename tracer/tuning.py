@@ -154,8 +154,10 @@ def no_tuning() -> Tuning:
     return Tuning(np.zeros((0, 1)), np.zeros((0, 1, 3)), SHARES, 1, 1, True)
 
 
+@jit
 def group_of(sample: int, replicates: int, groups: int) -> int:
-    """The group whose learning a sample of index ``sample`` uses the other group's of."""
+    """The group of the sample of index ``sample``: its replicate's parity with two groups
+    (each group applies what the other's samples taught), 0 with one."""
     return (sample % replicates) % groups
 
 
@@ -357,7 +359,7 @@ def reduce_lanes(radiance, lane_stats, npix: int, k: int, first_sample: int, rep
                 finite = finite and np.isfinite(lane_stats[lane, col])
             if not finite:
                 continue
-            g = ((first_sample + j) % replicates) % groups
+            g = group_of(first_sample + j, replicates, groups)
             for col in range(LANE_COLUMNS):
                 out[row, g, col] += lane_stats[lane, col]
             out[row, g, COUNT] += 1.0
@@ -376,7 +378,7 @@ def apply_control(radiance, lane_stats, alpha, first_pixel: int, k: int, first_s
     a the coefficient of the lane's pixel and group: V -> V + a C."""
     for lane in range(len(radiance)):
         pixel = first_pixel + lane // k
-        g = ((first_sample + lane % k) % replicates) % groups
+        g = group_of(first_sample + lane % k, replicates, groups)
         c = lane_stats[lane, CONTROL]
         for ch in range(3):
             radiance[lane, ch] += alpha[pixel, g, ch] * c
