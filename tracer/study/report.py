@@ -31,6 +31,7 @@ from .compare import (
     run_row,
     sweep_curves,
 )
+from .viewer import section_html, viewer_data, write_viewer
 
 RELERR_RANGE = (-5.0, 1.0)  # log10 of per-pixel relative squared error shown in the maps
 RATIO_RANGE = 4.0  # log2 efficiency ratio shown from -4 to 4 (16x either way)
@@ -140,8 +141,8 @@ def relerr_map(run: Run, reference: Film, path: Path, formats: tuple[str, ...] =
                     "log10 (I-R)² / (R²+0.01)", vmin=RELERR_RANGE[0], vmax=RELERR_RANGE[1], formats=formats)
 
 
-def flip_map(run: Run, reference: Film, path: Path, formats: tuple[str, ...] = ("png",)) -> float:
-    """The HDR-FLIP perceptual error map (OpenImageIO's built-in); returns the mean FLIP."""
+def flip_map(run: Run, reference: Film, path: Path, formats: tuple[str, ...] = ("png",)) -> np.ndarray:
+    """The HDR-FLIP perceptual error map (OpenImageIO's built-in); returns it, ``(H, W)``."""
     import OpenImageIO as oiio
 
     ref_buf = oiio.ImageBuf(np.ascontiguousarray(reference.image(), dtype=np.float32))
@@ -149,7 +150,7 @@ def flip_map(run: Run, reference: Film, path: Path, formats: tuple[str, ...] = (
     flip = oiio.ImageBufAlgo.FLIP_diff(ref_buf, test_buf).get_pixels(oiio.FLOAT)[..., 0]
     save_map(flip, path, f"{run_name(run)}: FLIP (mean {flip.mean():.3f})", "FLIP error", vmin=0.0, vmax=1.0,
              formats=formats)
-    return float(flip.mean())
+    return flip
 
 
 def ratio_map(a: Run, b: Run, reference: Film, path: Path,
@@ -468,6 +469,13 @@ the sweep's longest; otherwise n/a, with the reason.{caveat}</p>
 """
 
 
+def _sort_value(value: Any) -> str:
+    """A table cell's number for sorting (``repr`` of the float: exact), empty when undefined."""
+    if value is None or not np.isfinite(value):
+        return ""
+    return repr(float(value))
+
+
 def write_index(out: Path, document: dict[str, Any], images: dict[str, list[list[str]]]) -> None:
     """A static page with the grid, maps, charts and tables; relative links only. ``images``
     maps a section title to its figures, each the list of its files (PNG first, shown; the
@@ -478,10 +486,12 @@ def write_index(out: Path, document: dict[str, Any], images: dict[str, list[list
     rows = []
     for r in document["results"]:
         budget = f" of {r['budget']:.2f}" if "budget" in r else ""
-        rows.append(
-            f"<tr><td>{esc(r['name'])}</td><td>{r['spp']}</td><td>{r['seconds']:.2f}{budget}</td>"
-            f"<td>{number(r['mse'])}</td><td>{number(r['relmse'])}</td><td>{number(r['variance'])}</td>"
-            f"<td>{number(r['efficiency'])}</td><td>{number(r.get('flip'), '.3f')}</td></tr>")
+        cells = [(r["spp"], str(r["spp"])), (r["seconds"], f"{r['seconds']:.2f}{budget}")]
+        cells += [(r[k], number(r[k])) for k in ("mse", "relmse", "variance", "efficiency")]
+        cells.append((r.get("flip"), number(r.get("flip"), ".3f")))
+        # data-value: the number a click on the column's head sorts by (empty: n/a, sorted last)
+        rows.append(f"<tr><td>{esc(r['name'])}</td>" + "".join(
+            f'<td data-value="{_sort_value(value)}">{text}</td>' for value, text in cells) + "</tr>")
     sections = []
     for title, figures in images.items():
         shown = "".join(f'<a href="{esc(f[0])}"><img src="{esc(f[0])}" alt="{esc(f[0])}"></a>'
@@ -493,6 +503,9 @@ def write_index(out: Path, document: dict[str, Any], images: dict[str, list[list
         if title.startswith("Error against time"):
             sections.append(_convergence_html(document))
     seconds_head = "CPU seconds" if clock == "cpu" else "seconds"
+    table = (f'<table class="sortable" id="metrics"><tr><th>strategy</th><th>spp</th><th>{seconds_head}</th>'
+             "<th>MSE</th><th>relMSE</th><th>variance</th><th>efficiency</th><th>FLIP</th></tr>\n"
+             + "\n".join(rows) + "\n</table>")
     clock_text = ("process CPU time of each render, summed over its threads (time.process_time)"
                   if clock == "cpu" else "wall-clock time of each render")
     page = f"""<!doctype html>
@@ -519,11 +532,10 @@ relMSE = mean (I&minus;R)&sup2;/(R&sup2;+0.01) and MSE = mean (I&minus;R)&sup2;,
 reference's own variance (its noise, relMSE {number(document['reference_noise']['relmse'])}, which
 adds to every measured error; <code>*_uncorrected</code> in the data are as measured; the error maps
 are uncorrected); efficiency = 1/(relMSE &times; {seconds_head}), n/a where relMSE is not positive.
-Data: <a href="metrics.json">metrics.json</a>, <a href="metrics.csv">metrics.csv</a>.</p>
-<table><tr><th>strategy</th><th>spp</th><th>{seconds_head}</th><th>MSE</th><th>relMSE</th>
-<th>variance</th><th>efficiency</th><th>FLIP</th></tr>
-{''.join(rows)}
-</table>
+Data: <a href="metrics.json">metrics.json</a>, <a href="metrics.csv">metrics.csv</a>. The viewer
+draws the 32-bit floats of each render's EXR (packed in <code>viewer_data.js</code>): exposure and maps
+are applied live; click a column's head to sort the table.</p>
+{section_html(table)}
 {''.join(sections)}
 </body></html>
 """
@@ -605,7 +617,7 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
     grid_image(runs, reference, windows, exposure, out / "grid.png")
     images["Side by side (insets: where the strategies differ most)"] = [["grid.png"]]
 
-    results, relerr_files, flip_files = [], [], []
+    results, relerr_files, flip_files, viewed = [], [], [], []
     for run in runs:
         name = run_name(run)
         write_exr(out / f"{name}.exr", run.film)  # the header carries the record render() set
@@ -613,7 +625,9 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
         relerr_files.append(relerr_map(run, reference, out / f"{name}_relerr.png", formats))
         flip = flip_map(run, reference, out / f"{name}_flip.png", formats)
         flip_files.append([f"{name}_flip.{fmt}" for fmt in dict.fromkeys(("png", *formats))])
-        results.append(result_row(run, flip))
+        results.append(result_row(run, float(flip.mean())))
+        viewed.append({"name": name, "film": run.film, "seconds": run.seconds, "unit": _unit(run.clock),
+                       "flip": flip})
     images["Relative squared error"] = relerr_files
     images["FLIP perceptual error"] = flip_files
     learned_files = [figure for run in runs for figure in learned_maps(run, out, formats)]
@@ -623,7 +637,8 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
 
     wins = []
     ratio_files = []
-    for a, b in efficiency_pairs(runs):
+    pairs = efficiency_pairs(runs)
+    for a, b in pairs:
         stem = f"efficiency_{run_name(a)}_vs_{run_name(b)}"
         share = ratio_map(a, b, reference, out / f"{stem}.png", formats)
         ratio_files.append([f"{stem}.{fmt}" for fmt in dict.fromkeys(("png", *formats))])
@@ -631,6 +646,10 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
                      "share_b_wins": share["b_wins"]})
     if ratio_files:
         images["Per-pixel efficiency ratio (where each strategy wins)"] = ratio_files
+    # The viewer's efficiency view compares with the first pair's second run by default.
+    baseline = next(i for i, r in enumerate(runs) if r is pairs[0][1]) if pairs else None
+    write_viewer(out, viewer_data(scene_name, reference, viewed, exposure, RELERR_RANGE, RATIO_RANGE,
+                                  baseline))
 
     reference_variance = reference.variance_of_mean()
     document: dict[str, Any] = {

@@ -1,0 +1,140 @@
+"""The interactive viewer of a comparison report: the float data it draws (``viewer_data.js``)
+and the page's part that holds it (``viewer.js``, written beside ``index.html``).
+
+The report opens from disk (``file://``) with no server and no network. Browsers refuse
+``fetch`` and ``XMLHttpRequest`` of local files, but they run local scripts, so the data are a
+script: one assignment ``window.TRACER_VIEWER_DATA = {...}`` (JSON) whose arrays are base64
+strings of little-endian IEEE 32-bit floats, row-major (row y from the top, then x, then the
+channel). 32-bit, not half floats: they are the very numbers of the EXRs (whose means are 32-bit),
+so the pixel readout shows what ``oiiotool`` would, and variances of small bright emitters, which
+exceed half floats' 65504, stay finite. The cost is size: 24 bytes per pixel per image (mean and
+variance of the mean, 3 channels each) plus 4 for a FLIP map, times 4/3 for base64; a 256 x 256
+comparison of five strategies (and the reference) is 14 MB.
+
+Everything the viewer shows is computed in the browser from those numbers, the way
+``tracer.study.metrics`` computes it for the static maps: the exposure and sRGB curve
+(``imagefiles.to_srgb8``), the relative squared error (``metrics.relative_squared_error``, channel
+mean), the efficiency ratio against any other image (``metrics.efficiency_ratio_map``: the squared
+error averaged over channels and a 7 x 7 window, times seconds), the variance of the mean.
+Only FLIP, which OpenImageIO computes, travels as a map. The colour scales are matplotlib's, as
+256-entry tables, so the live maps match the static PNGs.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..atomic import write_text
+from ..film import Film
+from . import metrics
+
+DATA_FILE = "viewer_data.js"
+SCRIPT_FILE = "viewer.js"
+FORMAT_VERSION = 1
+# The views other than the image itself: what each shows, on what scale and in what colours
+# (the static maps' ranges: report.RELERR_RANGE and RATIO_RANGE; the variance's is the data's).
+COLORMAPS = ("magma", "RdBu")
+
+
+def pack(values: np.ndarray) -> str:
+    """``values`` as base64 of little-endian 32-bit floats in C (row-major) order."""
+    return base64.b64encode(np.ascontiguousarray(values, dtype="<f4").tobytes()).decode("ascii")
+
+
+def unpack(text: str, shape: tuple[int, ...]) -> np.ndarray:
+    """The inverse of :func:`pack`: a float32 array of ``shape``."""
+    return np.frombuffer(base64.b64decode(text), dtype="<f4").reshape(shape)
+
+
+def colormap_table(name: str) -> list[list[int]]:
+    """matplotlib's colour map ``name`` as 256 [r, g, b] entries in 0..255."""
+    import matplotlib
+
+    table = matplotlib.colormaps[name](np.linspace(0.0, 1.0, 256))[:, :3]
+    return np.rint(table * 255.0).astype(int).tolist()
+
+
+def _log_variance_range(films: list[Film]) -> list[float]:
+    """The variance view's default range: log10 of the variance of the pixel mean (channel
+    mean) from its 1st to its 99.5th percentile over every image's nonzero pixels."""
+    logs = [np.log10(v[v > 0.0]) for v in (f.variance_of_mean().mean(axis=1) for f in films)]
+    logs = np.concatenate(logs) if logs else np.zeros(0)
+    if logs.size == 0:
+        return [-6.0, 0.0]
+    low, high = np.percentile(logs, [1.0, 99.5])
+    low, high = float(np.floor(low)), float(np.ceil(high))
+    return [low, high if high > low else low + 1.0]
+
+
+def viewer_data(scene: str, reference: Film, images: list[dict[str, Any]], exposure: float,
+                relerr_range: tuple[float, float], ratio_range: float,
+                baseline: int | None) -> dict[str, Any]:
+    """The document ``viewer_data.js`` assigns. ``images``: one dict per compared render, in the
+    report's order, with ``name``, ``film``, ``seconds``, ``unit`` (``s`` or ``CPU s``) and
+    ``flip`` (an ``(H, W)`` map); ``baseline``: the index among them of the efficiency view's
+    default comparison (None: the first)."""
+    h, w = reference.height, reference.width
+    entries = [{"name": "reference", "spp": reference.spp, "seconds": None, "unit": "",
+                "mean": pack(reference.image()), "variance": pack(reference.variance_of_mean()),
+                "flip": None}]
+    for image in images:
+        film = image["film"]
+        if (film.height, film.width) != (h, w):
+            raise ValueError(f"{image['name']} is {film.width}x{film.height}, the reference {w}x{h}")
+        entries.append({"name": image["name"], "spp": film.spp, "seconds": float(image["seconds"]),
+                        "unit": image["unit"], "mean": pack(film.image()),
+                        "variance": pack(film.variance_of_mean()), "flip": pack(image["flip"])})
+    films = [reference] + [image["film"] for image in images]
+    return {
+        "format": "tracer-viewer", "version": FORMAT_VERSION, "scene": scene,
+        "encoding": "base64 of little-endian float32, row-major (y from the top, x, channel)",
+        "width": w, "height": h, "exposure": float(exposure),
+        "relmse_epsilon": metrics.RELMSE_EPSILON, "efficiency_radius": 3,
+        "baseline": 1 + (baseline or 0) if images else None,
+        "images": entries,
+        "views": {
+            "relerr": {"range": [float(relerr_range[0]), float(relerr_range[1])], "colormap": "magma",
+                       "label": "log10 relative squared error (I-R)²/(R²+0.01), mean of RGB"},
+            "flip": {"range": [0.0, 1.0], "colormap": "magma", "label": "FLIP error (OpenImageIO)"},
+            "efficiency": {"range": [-float(ratio_range), float(ratio_range)], "colormap": "RdBu",
+                           "label": "log2 efficiency ratio (blue: this image wins)"},
+            "variance": {"range": _log_variance_range(films), "colormap": "magma",
+                         "label": "log10 variance of the pixel mean (σ²/spp), mean of RGB"},
+        },
+        "colormaps": {name: colormap_table(name) for name in COLORMAPS},
+    }
+
+
+def write_viewer(out: Path, document: dict[str, Any]) -> list[str]:
+    """Write ``viewer_data.js`` (``document``, from :func:`viewer_data`) and ``viewer.js`` into
+    ``out``, atomically; returns their names."""
+    data = json.dumps(document, separators=(",", ":"), allow_nan=False)
+    write_text(out / DATA_FILE, f"window.TRACER_VIEWER_DATA = {data};\n")
+    write_text(out / SCRIPT_FILE, resources.files(__package__).joinpath(SCRIPT_FILE).read_text("utf-8"))
+    return [DATA_FILE, SCRIPT_FILE]
+
+
+def read_viewer_data(path: Path) -> dict[str, Any]:
+    """The document a ``viewer_data.js`` assigns (tests, and tools that want the numbers)."""
+    text = Path(path).read_text("utf-8")
+    start, end = text.index("{"), text.rindex("}")
+    return json.loads(text[start:end + 1])
+
+
+def section_html(table: str) -> str:
+    """The page's viewer: an empty frame that ``viewer.js`` fills, beside ``table`` (the metrics
+    table, HTML, which the script makes sortable), and what a reader without scripts sees."""
+    return f"""<div class="viewer-layout">
+<div id="tracer-viewer" class="viewer"><noscript><p>The interactive viewer needs JavaScript; the
+static images below show the same comparison.</p></noscript></div>
+<div class="viewer-side">{table}</div>
+</div>
+<script src="{DATA_FILE}"></script>
+<script src="{SCRIPT_FILE}"></script>
+"""
