@@ -1,14 +1,24 @@
-"""Shared fixtures: small scenes written to a temporary folder."""
+"""Shared fixtures: small scenes written to a temporary folder; the PYTHONPATH of child processes."""
 
 from __future__ import annotations
 
+import os
 import textwrap
 from pathlib import Path
 
 import pytest
 
+import tracer
+
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "tracer" / "scenes"
+
+# Child processes (``python -m tracer ...`` in another folder, a notebook's kernel) import the
+# same copy of tracer as the tests: ``python -m pytest`` in a checkout imports the checkout's,
+# while a child elsewhere would import the installed one and compile every kernel a second time
+# for it (about 100 s of CI). tests/test_packaging.py checks the installed copy holds every file.
+os.environ["PYTHONPATH"] = os.pathsep.join(
+    [str(Path(tracer.__file__).resolve().parent.parent), *filter(None, [os.environ.get("PYTHONPATH")])])
 
 
 @pytest.fixture
