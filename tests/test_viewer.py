@@ -208,6 +208,13 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
     _click(driver, _canvas_point(driver, state, (x, y)))
     assert _state(driver)["pinned"] == [x, y]
 
+    seconds = {image["name"]: image["seconds"] for image in data["images"]}
+
+    def ratio_at(name: str, against: str) -> float:
+        """log2 efficiency(name) / efficiency(against) at the held pixel, from the EXRs."""
+        squared = [(planes[n][0].astype(np.float64) - reference) ** 2 for n in (name, against)]
+        return metrics.efficiency_ratio_map(squared[0], seconds[name], squared[1], seconds[against])[y, x]
+
     def check_readout(name: str) -> None:
         shown = _readout(driver)
         assert shown["pixel"].startswith(f"{x}, {y}") and shown["image"] == name
@@ -222,11 +229,8 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
         assert float(shown["relerr"]) == pytest.approx(relerr, rel=1e-6)
         against = names[_state(driver)["baseline"]]
         if name != against:
-            ratio = metrics.efficiency_ratio_map((mean.astype(np.float64) - reference) ** 2,
-                                                 data["images"][names.index(name)]["seconds"],
-                                                 (planes[against][0].astype(np.float64) - reference) ** 2,
-                                                 data["images"][names.index(against)]["seconds"])
-            assert float(shown["efficiency"].split()[0]) == pytest.approx(ratio[y, x], rel=1e-6, abs=1e-9)
+            ratio = ratio_at(name, against)
+            assert float(shown["efficiency"].split()[0]) == pytest.approx(ratio, rel=1e-6, abs=1e-9)
         else:
             assert shown["efficiency"] == "n/a"
 
@@ -288,6 +292,19 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
     assert raised[0] == low and raised[1] > high
     assert float(driver.find_element("id", "viewer-range-high").get_attribute("value")) == raised[1]
     assert driver.find_element("id", "viewer-scale-high").text == format(raised[1], "g")
+
+    # The efficiency view against an image chosen in the list (whose focus goes back to the page,
+    # so the next key acts): the RdBu colour of the ratio at the held pixel, computed here.
+    # (as a user's pick leaves it: the list focused, then a change event)
+    driver.execute_script("const list = document.getElementById('viewer-baseline'); list.focus();"
+                          "list.value = arguments[0]; list.dispatchEvent(new Event('change'));",
+                          str(names.index("light")))
+    _keys(driver, "6e")
+    state = _state(driver)
+    assert (names[state["image"]], state["view"], names[state["baseline"]]) == ("mis", "efficiency", "light")
+    low, high = state["ranges"]["efficiency"]
+    assert _is_lut_colour(_canvas_rgb(driver, point), _lut("RdBu"), ratio_at("mis", "light"), low, high)
+    check_readout("mis")
 
     # Sorting: relMSE ascending, then descending (undefined values last either way).
     results = json.loads((report / "metrics.json").read_text())["results"]

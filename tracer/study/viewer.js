@@ -151,6 +151,8 @@
   // ------------------------------------------------------------------------------------------
   // The page: toolbar, canvas, colour scale, readout.
 
+  // The settings' inputs give the focus back after a change (blur), so that the keys, which
+  // are ignored while an input has the focus, work again at once.
   function el(tag, attrs, ...children) {
     const node = document.createElement(tag);
     for (const [k, v] of Object.entries(attrs || {})) {
@@ -203,15 +205,15 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
       `${view.key} ${view.title}`));
   }
   const exposureBox = el("input", {type: "number", step: "0.5", id: "viewer-exposure",
-    onchange: () => { state.exposure = Number(exposureBox.value) || 0; redraw(true); }});
+    onchange: () => { state.exposure = Number(exposureBox.value) || 0; exposureBox.blur(); redraw(true); }});
   const srgbBox = el("input", {type: "checkbox", id: "viewer-srgb",
-    onchange: () => { state.srgb = srgbBox.checked; redraw(true); }});
+    onchange: () => { state.srgb = srgbBox.checked; srgbBox.blur(); redraw(true); }});
   const rangeLow = el("input", {type: "number", step: "any", id: "viewer-range-low",
-    onchange: () => setRange(0, Number(rangeLow.value))});
+    onchange: () => { rangeLow.blur(); setRange(0, Number(rangeLow.value)); }});
   const rangeHigh = el("input", {type: "number", step: "any", id: "viewer-range-high",
-    onchange: () => setRange(1, Number(rangeHigh.value))});
+    onchange: () => { rangeHigh.blur(); setRange(1, Number(rangeHigh.value)); }});
   const baselineBox = el("select", {id: "viewer-baseline",
-    onchange: () => { state.baseline = Number(baselineBox.value); redraw(true); }});
+    onchange: () => { state.baseline = Number(baselineBox.value); baselineBox.blur(); redraw(true); }});
   images.forEach((image, i) => { if (i > 0) baselineBox.append(el("option", {value: i}, image.name)); });
   const settingsBar = el("div", {class: "viewer-bar"},
     el("label", {}, "exposure (stops) ", exposureBox),
