@@ -76,6 +76,22 @@ def test_packed_data_are_the_exrs_floats(report):
     assert (report / viewer.SCRIPT_FILE).read_text() == shipped.read_text()
 
 
+def test_a_viewer_too_big_for_a_browser_is_left_out_with_the_reason(report, tmp_path, monkeypatch):
+    """Past MAX_DATA_BYTES of floats the report writes no viewer data; the page says why where the
+    viewer would be, keeps the script (it sorts the table) and links nothing missing; metrics.json
+    records the size it would have had."""
+    monkeypatch.setattr(viewer, "MAX_DATA_BYTES", 1000)
+    out = tmp_path / "cmp"
+    assert main(["compare", str(SCENES / "cornell.toml"), "--reference", str(report.parent / "ref.exr"),
+                 "--spp", "1", "--strategies", "light,mis", "--out", str(out), "--quiet"]) == 0
+    page = (out / "index.html").read_text()
+    assert "The interactive viewer was left out" in page and 'data-omitted="true"' in page
+    assert not (out / viewer.DATA_FILE).exists() and viewer.DATA_FILE not in page
+    assert (out / viewer.SCRIPT_FILE).is_file()
+    document = json.loads((out / "metrics.json").read_text())
+    assert document["viewer"] == {"data_bytes": WIDTH * HEIGHT * (24 * 3 + 4 * 2), "written": False}
+
+
 def test_pack_round_trips_float32():
     values = np.array([[0.0, -1.5, 3.4028235e38], [1e-45, np.pi, 65504.0 * 4]], dtype=np.float64)
     assert np.array_equal(viewer.unpack(viewer.pack(values), (2, 3)), values.astype(np.float32))

@@ -21,7 +21,7 @@ import numpy as np
 from ..atomic import save_figure, write_text
 from ..film import Film
 from ..imagefiles import to_srgb8, write_exr, write_png
-from . import metrics
+from . import metrics, viewer
 from .compare import (
     CONFIDENCE,
     EXTRAPOLATION_LIMIT,
@@ -31,7 +31,6 @@ from .compare import (
     run_row,
     sweep_curves,
 )
-from .viewer import section_html, viewer_data, write_viewer
 
 RELERR_RANGE = (-5.0, 1.0)  # log10 of per-pixel relative squared error shown in the maps
 RATIO_RANGE = 4.0  # log2 efficiency ratio shown from -4 to 4 (16x either way)
@@ -476,10 +475,12 @@ def _sort_value(value: Any) -> str:
     return repr(float(value))
 
 
-def write_index(out: Path, document: dict[str, Any], images: dict[str, list[list[str]]]) -> None:
-    """A static page with the grid, maps, charts and tables; relative links only. ``images``
-    maps a section title to its figures, each the list of its files (PNG first, shown; the
-    vector copies linked)."""
+def write_index(out: Path, document: dict[str, Any], images: dict[str, list[list[str]]],
+                viewer_omitted: str | None = None) -> None:
+    """The page: the viewer (or why it was left out: ``viewer_omitted``) beside the metrics
+    table, then the grid, maps, charts and tables; relative links only. ``images`` maps a
+    section title to its figures, each the list of its files (PNG first, shown; the vector
+    copies linked)."""
     esc = html.escape
     mode = document["mode"]
     clock = mode.get("clock", "wall")
@@ -503,6 +504,9 @@ def write_index(out: Path, document: dict[str, Any], images: dict[str, list[list
         if title.startswith("Error against time"):
             sections.append(_convergence_html(document))
     seconds_head = "CPU seconds" if clock == "cpu" else "seconds"
+    viewer_text = "" if viewer_omitted else (
+        " The viewer draws the 32-bit floats of each render's EXR (packed in <code>viewer_data.js</code>): "
+        "exposure and maps are applied live.")
     table = (f'<table class="sortable" id="metrics"><tr><th>strategy</th><th>spp</th><th>{seconds_head}</th>'
              "<th>MSE</th><th>relMSE</th><th>variance</th><th>efficiency</th><th>FLIP</th></tr>\n"
              + "\n".join(rows) + "\n</table>")
@@ -532,10 +536,9 @@ relMSE = mean (I&minus;R)&sup2;/(R&sup2;+0.01) and MSE = mean (I&minus;R)&sup2;,
 reference's own variance (its noise, relMSE {number(document['reference_noise']['relmse'])}, which
 adds to every measured error; <code>*_uncorrected</code> in the data are as measured; the error maps
 are uncorrected); efficiency = 1/(relMSE &times; {seconds_head}), n/a where relMSE is not positive.
-Data: <a href="metrics.json">metrics.json</a>, <a href="metrics.csv">metrics.csv</a>. The viewer
-draws the 32-bit floats of each render's EXR (packed in <code>viewer_data.js</code>): exposure and maps
-are applied live; click a column's head to sort the table.</p>
-{section_html(table)}
+Data: <a href="metrics.json">metrics.json</a>, <a href="metrics.csv">metrics.csv</a>.{viewer_text}
+Click a column's head to sort the table.</p>
+{viewer.section_html(table, html.escape(viewer_omitted) if viewer_omitted else None)}
 {''.join(sections)}
 </body></html>
 """
@@ -648,8 +651,15 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
         images["Per-pixel efficiency ratio (where each strategy wins)"] = ratio_files
     # The viewer's efficiency view compares with the first pair's second run by default.
     baseline = next(i for i, r in enumerate(runs) if r is pairs[0][1]) if pairs else None
-    write_viewer(out, viewer_data(scene_name, reference, viewed, exposure, RELERR_RANGE, RATIO_RANGE,
-                                  baseline))
+    size = viewer.data_bytes(reference.width, reference.height, len(runs))
+    omitted = None
+    if size > viewer.MAX_DATA_BYTES:
+        omitted = (f"The interactive viewer was left out: its data would be {size / 2**20:.0f} MiB of "
+                   f"floats, more than the {viewer.MAX_DATA_BYTES / 2**20:.0f} MiB a browser loads in "
+                   "reasonable time (compare fewer strategies or a smaller reference for one). The static "
+                   "images below show the same comparison.")
+    viewer.write_viewer(out, None if omitted else viewer.viewer_data(
+        scene_name, reference, viewed, exposure, RELERR_RANGE, RATIO_RANGE, baseline))
 
     reference_variance = reference.variance_of_mean()
     document: dict[str, Any] = {
@@ -673,6 +683,7 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
         document["allocation"] = rows
         images["MIS sample allocation (light : BSDF)"] = [
             allocation_chart(rows, out / "allocation.png", clock, formats)]
+    document["viewer"] = {"data_bytes": size, "written": omitted is None}
     write_tables(out, document)
-    write_index(out, document, images)
+    write_index(out, document, images, omitted)
     return document

@@ -12,9 +12,12 @@
 (function () {
   "use strict";
 
+  // Sortable tables first: the page has them whether or not it has the viewer's data.
+  document.querySelectorAll("table.sortable").forEach(sortable);
+
   const data = window.TRACER_VIEWER_DATA;
   const root = document.getElementById("tracer-viewer");
-  if (!root) return;
+  if (!root || root.dataset.omitted) return;  // no viewer on the page, or left out (it says why)
   if (!data || data.format !== "tracer-viewer") {
     root.textContent = "The viewer's data (viewer_data.js) is missing or not a tracer viewer file.";
     return;
@@ -31,7 +34,8 @@
   function decode(text) {
     // base64 -> Float32Array; the bytes are little-endian, as every browser's typed arrays are
     // on the little-endian machines browsers run on (checked below, once).
-    const bytes = Uint8Array.from(atob(text), (c) => c.charCodeAt(0));
+    const binary = atob(text), bytes = new Uint8Array(binary.length);
+    for (let i = 0; i < binary.length; i++) bytes[i] = binary.charCodeAt(i);  // no call per byte
     return new Float32Array(bytes.buffer);
   }
   if (new Uint8Array(new Float32Array([1]).buffer)[3] !== 0x3f) {
@@ -550,8 +554,6 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
       for (const row of rows) body.append(row);
     }));
   }
-  document.querySelectorAll("table.sortable").forEach(sortable);
-
   window.tracerViewer = {state, images, pixelAt, setImage, setView, fit, redraw};
   fit();
   redraw(true);

@@ -40,6 +40,10 @@ FORMAT_VERSION = 1
 # The views other than the image itself: what each shows, on what scale and in what colours
 # (the static maps' ranges: report.RELERR_RANGE and RATIO_RANGE; the variance's is the data's).
 COLORMAPS = ("magma", "RdBu")
+# Past this much float data (before base64: 4/3 of it as text) a browser takes many seconds and
+# gigabytes to load the page, so the report leaves the viewer out and says why. A 1024 x 1024
+# comparison of five strategies (164 MiB) stays under it.
+MAX_DATA_BYTES = 192 * 2**20
 
 
 def pack(values: np.ndarray) -> str:
@@ -111,13 +115,17 @@ def viewer_data(scene: str, reference: Film, images: list[dict[str, Any]], expos
     }
 
 
-def write_viewer(out: Path, document: dict[str, Any]) -> list[str]:
-    """Write ``viewer_data.js`` (``document``, from :func:`viewer_data`) and ``viewer.js`` into
-    ``out``, atomically; returns their names."""
-    data = json.dumps(document, separators=(",", ":"), allow_nan=False)
-    write_text(out / DATA_FILE, f"window.TRACER_VIEWER_DATA = {data};\n")
+def write_viewer(out: Path, document: dict[str, Any] | None) -> list[str]:
+    """Write ``viewer_data.js`` (``document``, from :func:`viewer_data`; None: none, the
+    viewer left out) and ``viewer.js`` (which also sorts the table) into ``out``, atomically;
+    returns their names."""
+    written = []
+    if document is not None:
+        data = json.dumps(document, separators=(",", ":"), allow_nan=False)
+        write_text(out / DATA_FILE, f"window.TRACER_VIEWER_DATA = {data};\n")
+        written.append(DATA_FILE)
     write_text(out / SCRIPT_FILE, resources.files(__package__).joinpath(SCRIPT_FILE).read_text("utf-8"))
-    return [DATA_FILE, SCRIPT_FILE]
+    return [*written, SCRIPT_FILE]
 
 
 def read_viewer_data(path: Path) -> dict[str, Any]:
@@ -127,9 +135,24 @@ def read_viewer_data(path: Path) -> dict[str, Any]:
     return json.loads(text[start:end + 1])
 
 
-def section_html(table: str) -> str:
+def data_bytes(width: int, height: int, renders: int) -> int:
+    """The viewer's float data for a comparison of ``renders`` at ``width`` x ``height``, in
+    bytes before base64: per pixel 24 of mean and variance for each render and the reference,
+    and 4 of FLIP for each render."""
+    return width * height * (24 * (renders + 1) + 4 * renders)
+
+
+def section_html(table: str, omitted: str | None = None) -> str:
     """The page's viewer: an empty frame that ``viewer.js`` fills, beside ``table`` (the metrics
-    table, HTML, which the script makes sortable), and what a reader without scripts sees."""
+    table, HTML, which the script makes sortable), and what a reader without scripts sees; or,
+    where the data were left out, ``omitted``: why (HTML)."""
+    if omitted is not None:
+        return f"""<div class="viewer-layout">
+<div id="tracer-viewer" class="viewer" data-omitted="true"><p>{omitted}</p></div>
+<div class="viewer-side">{table}</div>
+</div>
+<script src="{SCRIPT_FILE}"></script>
+"""
     return f"""<div class="viewer-layout">
 <div id="tracer-viewer" class="viewer"><noscript><p>The interactive viewer needs JavaScript; the
 static images below show the same comparison.</p></noscript></div>
