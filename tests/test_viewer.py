@@ -61,15 +61,18 @@ def test_packed_data_are_the_exrs_floats(report):
     data = viewer.read_viewer_data(report / viewer.DATA_FILE)
     assert (data["width"], data["height"], data["version"]) == (WIDTH, HEIGHT, viewer.FORMAT_VERSION)
     assert [image["name"] for image in data["images"]] == ["reference", *STRATEGIES]
+    results = json.loads((report / "metrics.json").read_text())["results"]
+    flips = {row["name"]: row["flip"] for row in results}
     for image in data["images"]:
         path = report.parent / "ref.exr" if image["name"] == "reference" else report / f"{image['name']}.exr"
         mean, variance = exr_planes(path, image["spp"])
         assert np.array_equal(viewer.unpack(image["mean"], (HEIGHT, WIDTH, 3)), mean), image["name"]
         packed = viewer.unpack(image["variance"], (HEIGHT, WIDTH, 3))
         assert np.allclose(packed, variance, rtol=2e-7, atol=0.0), image["name"]
-        if image["name"] != "reference":
+        if image["name"] != "reference":  # the FLIP map whose mean metrics.json reports
             flip = viewer.unpack(image["flip"], (HEIGHT, WIDTH))
-            assert 0.0 <= flip.min() and flip.max() <= 1.0
+            assert flip.mean(dtype=np.float64) == pytest.approx(flips[image["name"]], rel=1e-5)
+            assert 0.0 <= flip.min() and flip.max() <= 1.0 and flip.max() > 0.0
     page = (report / "index.html").read_text()
     assert f'<script src="{viewer.DATA_FILE}">' in page and f'<script src="{viewer.SCRIPT_FILE}">' in page
     shipped = Path(viewer.__file__).parent / viewer.SCRIPT_FILE
@@ -101,10 +104,10 @@ def test_pack_round_trips_float32():
 # In the browser
 
 
-@pytest.fixture(scope="module")
-def browser():
-    """Headless Chromium through chromedriver, with the flags this machine's closed network
-    needs (no background connections), logging the page's console."""
+def _start_chromium(scale: float):
+    """Headless Chromium through chromedriver at device scale factor ``scale``, with the flags
+    this machine's closed network needs (no background connections), logging the page's
+    console; skips (or fails, under TRACER_BROWSER_TESTS=required) when something is missing."""
     missing = [name for name, found in (("chromium", shutil.which("chromium")),
                                         ("chromedriver", shutil.which("chromedriver"))) if not found]
     try:
@@ -121,12 +124,24 @@ def browser():
     options.binary_location = shutil.which("chromium")
     for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
                  "--no-first-run", "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync", "--window-size=1400,1000", "--force-device-scale-factor=1"):
+                 "--disable-sync", "--window-size=1400,1100", f"--force-device-scale-factor={scale:g}"):
         options.add_argument(flag)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    driver = webdriver.Chrome(service=Service(shutil.which("chromedriver")), options=options)
+    return webdriver.Chrome(service=Service(shutil.which("chromedriver")), options=options)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    driver = _start_chromium(1.0)
     yield driver
     driver.quit()
+
+
+def _open(driver, report: Path) -> None:
+    """Load the report from disk and scroll the viewer's canvas to the middle of the window, so
+    that every pixel of it can be pointed at whatever the page's text above it takes."""
+    driver.get((report / "index.html").resolve().as_uri())
+    driver.execute_script("document.getElementById('viewer-canvas').scrollIntoView({block: 'center'})")
 
 
 def _readout(driver) -> dict[str, str]:
@@ -164,13 +179,14 @@ def _click(driver, point: tuple[float, float]) -> None:
     ActionChains(driver).move_to_element_with_offset(canvas, dx, dy).click().perform()
 
 
-def _canvas_rgb(driver, point: tuple[float, float]) -> np.ndarray:
-    """The 8-bit colour drawn at ``point`` of the canvas (device scale factor 1)."""
+def _canvas_rgb(driver, point: tuple[float, float], scale: float = 1.0) -> np.ndarray:
+    """The 8-bit colour drawn at ``point`` (CSS pixels) of the canvas, whose backing store has
+    ``scale`` (the device scale factor) store pixels per CSS pixel."""
     return np.array(driver.execute_script(
         "const c = document.getElementById('viewer-canvas');"
         "const rgba = c.getContext('2d').getImageData(arguments[0], arguments[1], 1, 1).data;"
         "return Array.from(rgba).slice(0, 3);",
-        int(point[0]), int(point[1])))
+        int(point[0] * scale), int(point[1] * scale)))
 
 
 def _lut(name: str) -> np.ndarray:
@@ -178,10 +194,22 @@ def _lut(name: str) -> np.ndarray:
 
 
 def _is_lut_colour(rgb: np.ndarray, table: np.ndarray, value: float, low: float, high: float) -> bool:
-    """Whether ``rgb`` is the colour-table entry of ``value`` on [low, high], or a neighbour of it
-    (a value on a bin's edge may fall either side of it in float32 and float64 arithmetic)."""
-    index = int(np.clip(np.floor((value - low) / (high - low) * 256), 0, 255))
-    return any(np.array_equal(rgb, table[i]) for i in range(max(0, index - 1), min(256, index + 2)))
+    """Whether ``rgb`` is the colour-table entry of ``value`` on [low, high]: bin floor(256 t), t
+    the value's place in the range; within 1e-4 of a bin's edge either bin (the browser's float64
+    sums and numpy's may round to either side of it)."""
+    t = (value - low) / (high - low) * 256.0
+    bins = {int(np.clip(np.floor(t), 0, 255))}
+    if abs(t - round(t)) < 1e-4:
+        bins |= {int(np.clip(round(t) - 1, 0, 255)), int(np.clip(round(t), 0, 255))}
+    return any(np.array_equal(rgb, table[i]) for i in bins)
+
+
+def _srgb8(value: np.ndarray, exposure: float, curve: bool = True) -> np.ndarray:
+    """imagefiles.to_srgb8 written out again: exposure, clipping, the sRGB curve, 8 bits."""
+    clipped = np.clip(value.astype(np.float64) * 2.0**exposure, 0.0, 1.0)
+    if curve:
+        clipped = np.where(clipped <= 0.0031308, 12.92 * clipped, 1.055 * clipped ** (1 / 2.4) - 0.055)
+    return np.rint(clipped * 255)
 
 
 def test_viewer_in_chromium_matches_the_exrs(report, browser):
@@ -192,11 +220,12 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
     the relative-error view draws matplotlib's magma entry of that pixel's value; the range keys
     move the colour scale; a click on a column's head sorts the metrics table."""
     driver = browser
-    driver.get((report / "index.html").resolve().as_uri())
+    _open(driver, report)
     errors = [entry for entry in driver.get_log("browser") if entry["level"] == "SEVERE"]
     assert not errors, errors
     data = viewer.read_viewer_data(report / viewer.DATA_FILE)
     names = [image["name"] for image in data["images"]]
+    flips = {image["name"]: viewer.unpack(image["flip"], (HEIGHT, WIDTH)) for image in data["images"][1:]}
     reference, reference_variance = exr_planes(report.parent / "ref.exr", REFERENCE_SPP)
     planes = {name: exr_planes(report / f"{name}.exr", SPP) for name in STRATEGIES}
 
@@ -215,21 +244,27 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
 
     # A lit pixel that uniform sampling found, and where the light-sampling render at +1 stop lies
     # inside the sRGB curve's range in every channel (not clipped, not 0), so that the curve shows.
+    # And where uniform and light sampling differ in efficiency, by far more than their times
+    # vary from run to run, so that its map shows which is which.
     doubled = 2.0 * planes["light"][0]
+    seconds = {image["name"]: image["seconds"] for image in data["images"]}
+
+    def ratio_map(name: str, against: str) -> np.ndarray:
+        """log2 efficiency(name) / efficiency(against) per pixel, from the EXRs."""
+        squared = [(planes[n][0].astype(np.float64) - reference) ** 2 for n in (name, against)]
+        return metrics.efficiency_ratio_map(squared[0], seconds[name], squared[1], seconds[against])
+
     lit = np.argwhere((reference.mean(axis=2) > 0.05) & (planes["uniform"][0].mean(axis=2) > 0.0)
-                      & np.all((doubled > 0.02) & (doubled < 0.9), axis=2))
+                      & np.all((doubled > 0.02) & (doubled < 0.9), axis=2)
+                      & (np.abs(ratio_map("uniform", "light")) > 1.0))
     assert len(lit), "no pixel to test on"
     y, x = (int(v) for v in lit[len(lit) // 2])
     state = _state(driver)
     _click(driver, _canvas_point(driver, state, (x, y)))
     assert _state(driver)["pinned"] == [x, y]
 
-    seconds = {image["name"]: image["seconds"] for image in data["images"]}
-
     def ratio_at(name: str, against: str) -> float:
-        """log2 efficiency(name) / efficiency(against) at the held pixel, from the EXRs."""
-        squared = [(planes[n][0].astype(np.float64) - reference) ** 2 for n in (name, against)]
-        return metrics.efficiency_ratio_map(squared[0], seconds[name], squared[1], seconds[against])[y, x]
+        return float(ratio_map(name, against)[y, x])
 
     def check_readout(name: str) -> None:
         shown = _readout(driver)
@@ -240,6 +275,7 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
         error = mean[y, x].astype(np.float64) - reference[y, x]
         np.testing.assert_allclose(_triple(shown["error"]), error, rtol=1e-6, atol=1e-12)
         np.testing.assert_allclose(_triple(shown["variance"]), variance[y, x], rtol=1e-6)
+        assert float(shown["flip"]) == pytest.approx(float(flips[name][y, x]), rel=1e-6, abs=1e-12)
         relerr = metrics.relative_squared_error(mean[y, x].astype(np.float64),
                                                 reference[y, x].astype(np.float64)).mean()
         assert float(shown["relerr"]) == pytest.approx(relerr, rel=1e-6)
@@ -277,7 +313,7 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
     # A drag pans by what the mouse moved, and holds no pixel.
     ActionChains(driver).move_to_element(canvas).click_and_hold().move_by_offset(40, 25).release().perform()
     panned = _state(driver)
-    assert (panned["ox"] - after["ox"], panned["oy"] - after["oy"]) == (40, 25)
+    assert (panned["ox"] - after["ox"], panned["oy"] - after["oy"]) == pytest.approx((40, 25), abs=1e-9)
     assert panned["pinned"] == [x, y]
 
     # Exposure and the sRGB curve act on the floats: the drawn colour of the held pixel.
@@ -287,12 +323,10 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
     state = _state(driver)
     assert state["exposure"] == 1.0
     point = _canvas_point(driver, state, (x, y))
-    value = planes["light"][0][y, x].astype(np.float64) * 2.0
-    clipped = np.clip(value, 0.0, 1.0)
-    srgb = np.where(clipped <= 0.0031308, 12.92 * clipped, 1.055 * clipped ** (1 / 2.4) - 0.055)
-    assert np.abs(_canvas_rgb(driver, point) - np.rint(srgb * 255)).max() <= 1
+    value = planes["light"][0][y, x]
+    assert np.abs(_canvas_rgb(driver, point) - _srgb8(value, 1.0)).max() <= 1  # 1: rounding of .5
     _keys(driver, "s")
-    assert np.abs(_canvas_rgb(driver, point) - np.rint(clipped * 255)).max() <= 1
+    assert np.abs(_canvas_rgb(driver, point) - _srgb8(value, 1.0, curve=False)).max() <= 1
     _keys(driver, "s")
 
     # The relative-error view: the magma colour of log10 of the pixel's relative squared error.
@@ -303,7 +337,15 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
     relerr = metrics.relative_squared_error(planes["light"][0][y, x].astype(np.float64),
                                             reference[y, x].astype(np.float64)).mean()
     assert _is_lut_colour(_canvas_rgb(driver, point), _lut("magma"), np.log10(relerr + 1e-12), low, high)
-    _keys(driver, "]")
+    # FLIP and the variance of the mean (channel mean, log10) in theirs.
+    _keys(driver, "f")
+    assert _is_lut_colour(_canvas_rgb(driver, point), _lut("magma"), float(flips["light"][y, x]),
+                          *_state(driver)["ranges"]["flip"])
+    _keys(driver, "v")
+    log_variance = np.log10(planes["light"][1][y, x].astype(np.float64).mean())
+    assert _is_lut_colour(_canvas_rgb(driver, point), _lut("magma"), log_variance,
+                          *_state(driver)["ranges"]["variance"])
+    _keys(driver, "r]")
     raised = _state(driver)["ranges"]["relerr"]
     assert raised[0] == low and raised[1] > high
     assert float(driver.find_element("id", "viewer-range-high").get_attribute("value")) == raised[1]
@@ -315,12 +357,13 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
     driver.execute_script("const list = document.getElementById('viewer-baseline'); list.focus();"
                           "list.value = arguments[0]; list.dispatchEvent(new Event('change'));",
                           str(names.index("light")))
-    _keys(driver, "6e")
+    _keys(driver, "2e")
     state = _state(driver)
-    assert (names[state["image"]], state["view"], names[state["baseline"]]) == ("mis", "efficiency", "light")
+    shown = (names[state["image"]], state["view"], names[state["baseline"]])
+    assert shown == ("uniform", "efficiency", "light")
     low, high = state["ranges"]["efficiency"]
-    assert _is_lut_colour(_canvas_rgb(driver, point), _lut("RdBu"), ratio_at("mis", "light"), low, high)
-    check_readout("mis")
+    assert _is_lut_colour(_canvas_rgb(driver, point), _lut("RdBu"), ratio_at("uniform", "light"), low, high)
+    check_readout("uniform")
 
     # Sorting: relMSE ascending, then descending (undefined values last either way).
     results = json.loads((report / "metrics.json").read_text())["results"]
@@ -338,3 +381,26 @@ def test_viewer_in_chromium_matches_the_exrs(report, browser):
     assert order() == by_relmse[::-1]
     errors = [entry for entry in driver.get_log("browser") if entry["level"] == "SEVERE"]
     assert not errors, errors
+
+
+def test_viewer_at_device_scale_factor_2(report):
+    """On a screen of 2 device pixels per CSS pixel (a laptop's), a click still reads the pixel
+    under it, and the canvas draws that pixel's colour (exposure 0, sRGB) in the store pixels
+    under it: the backing store is scaled, not the mapping."""
+    driver = _start_chromium(2.0)
+    try:
+        _open(driver, report)
+        assert driver.execute_script("return window.devicePixelRatio") == 2
+        _keys(driver, "5")  # light sampling
+        light = exr_planes(report / "light.exr", SPP)[0]
+        y, x = (int(v) for v in np.argwhere(np.all((light > 0.02) & (light < 0.9), axis=2))[0])
+        state = _state(driver)
+        point = _canvas_point(driver, state, (x, y))
+        _click(driver, point)
+        assert _readout(driver)["pixel"].startswith(f"{x}, {y}")
+        np.testing.assert_allclose(_triple(_readout(driver)["value"]), light[y, x], rtol=1e-6)
+        assert np.abs(_canvas_rgb(driver, point, scale=2.0) - _srgb8(light[y, x], 0.0)).max() <= 1
+        errors = [entry for entry in driver.get_log("browser") if entry["level"] == "SEVERE"]
+        assert not errors, errors
+    finally:
+        driver.quit()

@@ -110,10 +110,11 @@ def _sync(path: str | Path, directory: bool = False) -> None:
 
 
 def write_text(path: str | os.PathLike[str], text: str) -> None:
-    """Write a text file atomically."""
+    """Write a text file atomically, in UTF-8 whatever the locale (pages and scripts hold
+    characters such as † and ←, which a locale's encoding may not)."""
 
     def write(tmp: str) -> None:
-        with open(tmp, "w", newline="") as fh:
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
             fh.write(text)
 
     atomic_write(path, write)

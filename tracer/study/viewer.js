@@ -12,7 +12,37 @@
 (function () {
   "use strict";
 
-  // Sortable tables first: the page has them whether or not it has the viewer's data.
+  // The style and the sortable tables first: the page has its table whether or not it has the
+  // viewer's data.
+  const style = el("style", {}, `
+.viewer { flex: 1 1 640px; min-width: 320px; }
+.viewer-layout { display: flex; flex-wrap: wrap; gap: 1.5em; align-items: flex-start; }
+.viewer-side { flex: 0 1 auto; }
+.viewer-bar { display: flex; flex-wrap: wrap; gap: 0.3em; align-items: center; margin: 0.25em 0; }
+.viewer-bar button { font: inherit; font-size: 0.85em; padding: 0.15em 0.5em; border: 1px solid #999;
+  background: #eee; border-radius: 3px; cursor: pointer; }
+.viewer-bar button.on { background: #345; color: #fff; border-color: #345; }
+.viewer-bar label { font-size: 0.85em; margin-left: 0.6em; }
+.viewer-bar input[type=number] { width: 4.5em; }
+.viewer-stage { position: relative; background: #1d1d1d; overflow: hidden; cursor: crosshair;
+  user-select: none; }
+.viewer-stage canvas { display: block; }
+.viewer-caption { position: absolute; left: 6px; top: 4px; color: #fff; font-size: 0.85em;
+  text-shadow: 0 0 3px #000; pointer-events: none; }
+.viewer-why { position: absolute; inset: 0; display: flex; align-items: center; justify-content: center;
+  color: #ddd; font-size: 0.95em; pointer-events: none; }
+.viewer-scale { display: flex; align-items: center; gap: 0.5em; font-size: 0.8em; margin: 0.3em 0; }
+.viewer-scale canvas { border: 1px solid #999; }
+table.readout { font-size: 0.85em; margin: 0.4em 0; }
+table.readout td { font-family: monospace; text-align: right; }
+table.readout td:first-child { font-family: sans-serif; text-align: left; }
+table.sortable th { cursor: pointer; }
+table#metrics tr.current td { background: #dde6f0; }
+table.sortable th[data-order=ascending]::after { content: " \\25B2"; }
+table.sortable th[data-order=descending]::after { content: " \\25BC"; }
+.viewer-keys { font-size: 0.8em; color: #555; max-width: 40em; }
+`);
+  document.head.append(style);
   document.querySelectorAll("table.sortable").forEach(sortable);
 
   const data = window.TRACER_VIEWER_DATA;
@@ -142,8 +172,12 @@
         if (!images[i].flip) return {why: "FLIP compares a render with the reference"};
         return {values: images[i].flip};
       case "efficiency":
+        if (images.length < 3) return {why: "efficiency compares two renders: this report has one"};
         if (i === 0 || state.baseline === 0) return {why: "efficiency compares two renders (not the reference)"};
         if (i === state.baseline) return {why: "choose another image to compare against"};
+        if (!(images[i].seconds > 0 && images[state.baseline].seconds > 0)) {
+          return {why: "efficiency needs both renders' times, and one has none"};
+        }
         return {values: efficiency(i, state.baseline)};
       case "variance":
         return {values: logVariance(i)};
@@ -168,35 +202,6 @@
     return node;
   }
 
-  const style = el("style", {}, `
-.viewer { flex: 1 1 640px; min-width: 320px; }
-.viewer-layout { display: flex; flex-wrap: wrap; gap: 1.5em; align-items: flex-start; }
-.viewer-side { flex: 0 1 auto; }
-.viewer-bar { display: flex; flex-wrap: wrap; gap: 0.3em; align-items: center; margin: 0.25em 0; }
-.viewer-bar button { font: inherit; font-size: 0.85em; padding: 0.15em 0.5em; border: 1px solid #999;
-  background: #eee; border-radius: 3px; cursor: pointer; }
-.viewer-bar button.on { background: #345; color: #fff; border-color: #345; }
-.viewer-bar label { font-size: 0.85em; margin-left: 0.6em; }
-.viewer-bar input[type=number] { width: 4.5em; }
-.viewer-stage { position: relative; background: #1d1d1d; overflow: hidden; cursor: crosshair;
-  user-select: none; }
-.viewer-stage canvas { display: block; }
-.viewer-caption { position: absolute; left: 6px; top: 4px; color: #fff; font-size: 0.85em;
-  text-shadow: 0 0 3px #000; pointer-events: none; }
-.viewer-why { position: absolute; inset: 0; display: flex; align-items: center; justify-content: center;
-  color: #ddd; font-size: 0.95em; pointer-events: none; }
-.viewer-scale { display: flex; align-items: center; gap: 0.5em; font-size: 0.8em; margin: 0.3em 0; }
-.viewer-scale canvas { border: 1px solid #999; }
-table.readout { font-size: 0.85em; margin: 0.4em 0; }
-table.readout td { font-family: monospace; text-align: right; }
-table.readout td:first-child { font-family: sans-serif; text-align: left; }
-table.sortable th { cursor: pointer; }
-table#metrics tr.current td { background: #dde6f0; }
-table.sortable th[data-order=ascending]::after { content: " \\25B2"; }
-table.sortable th[data-order=descending]::after { content: " \\25BC"; }
-.viewer-keys { font-size: 0.8em; color: #555; max-width: 40em; }
-`);
-  document.head.append(style);
 
   const imageBar = el("div", {class: "viewer-bar", id: "viewer-images"});
   images.forEach((image, i) => {
@@ -209,13 +214,18 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
       `${view.key} ${view.title}`));
   }
   const exposureBox = el("input", {type: "number", step: "0.5", id: "viewer-exposure",
-    onchange: () => { state.exposure = Number(exposureBox.value) || 0; exposureBox.blur(); redraw(true); }});
+    onchange: () => {
+      const value = exposureBox.value === "" ? NaN : Number(exposureBox.value);
+      if (Number.isFinite(value)) state.exposure = value;
+      exposureBox.blur();
+      redraw(true);
+    }});
   const srgbBox = el("input", {type: "checkbox", id: "viewer-srgb",
     onchange: () => { state.srgb = srgbBox.checked; srgbBox.blur(); redraw(true); }});
   const rangeLow = el("input", {type: "number", step: "any", id: "viewer-range-low",
-    onchange: () => { rangeLow.blur(); setRange(0, Number(rangeLow.value)); }});
+    onchange: () => { rangeLow.blur(); setRange(0, rangeLow.value); }});
   const rangeHigh = el("input", {type: "number", step: "any", id: "viewer-range-high",
-    onchange: () => { rangeHigh.blur(); setRange(1, Number(rangeHigh.value)); }});
+    onchange: () => { rangeHigh.blur(); setRange(1, rangeHigh.value); }});
   const baselineBox = el("select", {id: "viewer-baseline",
     onchange: () => { state.baseline = Number(baselineBox.value); baselineBox.blur(); redraw(true); }});
   images.forEach((image, i) => { if (i > 0) baselineBox.append(el("option", {value: i}, image.name)); });
@@ -322,9 +332,14 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
     return [width, height, ratio];
   }
 
+  function fitScale() {
+    const [width, height] = stageSize();
+    return Math.min(width / W, height / H);
+  }
+
   function fit() {
     const [width, height] = layout();
-    state.scale = Math.min(width / W, height / H);
+    state.scale = fitScale();
     state.ox = (width - W * state.scale) / 2;
     state.oy = (height - H * state.scale) / 2;
     redraw(false);
@@ -423,7 +438,8 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
     cells.variance.textContent = triple(image.variance, p);
     cells.flip.textContent = image.flip ? format(image.flip[p], 7) : "n/a";
     const against = state.baseline;
-    cells.efficiency.textContent = compared && against > 0 && against !== i
+    const timed = compared && against > 0 && against !== i && image.seconds > 0 && images[against].seconds > 0;
+    cells.efficiency.textContent = timed
       ? `${format(efficiency(i, against)[p], 7)} (against ${images[against].name})` : "n/a";
   }
 
@@ -446,11 +462,16 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
     redraw(true);
   }
   function setRange(end, value) {
+    // One end of the current map's range; an empty or non-numeric entry, or one that would put
+    // the ends in the wrong order, leaves it as it was. Rounded to 6 decimals, so that steps
+    // of 0.05 do not show as 0.9500000000000001.
     const range = state.ranges[state.view];
-    if (!range || !Number.isFinite(value)) return;
-    const next = range.slice();
-    next[end] = value;
-    if (next[1] > next[0]) state.ranges[state.view] = next;
+    const number = value === "" ? NaN : Math.round(Number(value) * 1e6) / 1e6;
+    if (range && Number.isFinite(number)) {
+      const next = range.slice();
+      next[end] = number;
+      if (next[1] > next[0]) state.ranges[state.view] = next;
+    }
     redraw(true);
   }
   function rangeStep() {
@@ -458,7 +479,8 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
     return state.view === "flip" ? 0.05 : Math.max(0.25, Math.round((high - low) / 8 * 4) / 4);
   }
   function zoomAbout(cx, cy, factor) {
-    const next = Math.min(256, Math.max(0.05, state.scale * factor));
+    // At most 256 screen pixels per pixel, or 4 times the fit for an image smaller than that.
+    const next = Math.min(Math.max(256, 4 * fitScale()), Math.max(0.05, state.scale * factor));
     state.ox = cx - ((cx - state.ox) * next) / state.scale;
     state.oy = cy - ((cy - state.oy) * next) / state.scale;
     state.scale = next;
@@ -507,6 +529,8 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
     const target = event.target;
     if (event.ctrlKey || event.metaKey || event.altKey) return;
     if (target && (target.tagName === "INPUT" || target.tagName === "SELECT" || target.tagName === "TEXTAREA")) return;
+    const box = stage.getBoundingClientRect();  // the keys are the viewer's only while it is in view
+    if (box.bottom <= 0 || box.top >= window.innerHeight) return;
     const key = event.key;
     const view = VIEWS.find((v) => v.key === key.toLowerCase());
     const range = state.ranges[state.view];

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from ..atomic import write_text
+from ..atomic import atomic_write, write_text
 from ..film import Film
 from . import metrics
 
@@ -40,6 +40,7 @@ FORMAT_VERSION = 1
 # The views other than the image itself: what each shows, on what scale and in what colours
 # (the static maps' ranges: report.RELERR_RANGE and RATIO_RANGE; the variance's is the data's).
 COLORMAPS = ("magma", "RdBu")
+ARRAYS = ("mean", "variance", "flip")  # each image's packed arrays: (H, W, 3), (H, W, 3), (H, W)
 # Past this much float data (before base64: 4/3 of it as text) a browser takes many seconds and
 # gigabytes to load the page, so the report leaves the viewer out and says why. A 1024 x 1024
 # comparison of five strategies (164 MiB) stays under it.
@@ -79,21 +80,22 @@ def _log_variance_range(films: list[Film]) -> list[float]:
 def viewer_data(scene: str, reference: Film, images: list[dict[str, Any]], exposure: float,
                 relerr_range: tuple[float, float], ratio_range: float,
                 baseline: int | None) -> dict[str, Any]:
-    """The document ``viewer_data.js`` assigns. ``images``: one dict per compared render, in the
-    report's order, with ``name``, ``film``, ``seconds``, ``unit`` (``s`` or ``CPU s``) and
-    ``flip`` (an ``(H, W)`` map); ``baseline``: the index among them of the efficiency view's
-    default comparison (None: the first)."""
+    """The document ``viewer_data.js`` assigns, its arrays still float32 arrays (:func:`write_viewer`
+    packs them as it writes). ``images``: one dict per compared render, in the report's order,
+    with ``name``, ``film``, ``seconds``, ``unit`` (``s`` or ``CPU s``) and ``flip`` (an ``(H, W)``
+    map); ``baseline``: the index among them of the efficiency view's default comparison (None:
+    the first)."""
     h, w = reference.height, reference.width
     entries = [{"name": "reference", "spp": reference.spp, "seconds": None, "unit": "",
-                "mean": pack(reference.image()), "variance": pack(reference.variance_of_mean()),
+                "mean": _float32(reference.image()), "variance": _float32(reference.variance_of_mean()),
                 "flip": None}]
     for image in images:
         film = image["film"]
         if (film.height, film.width) != (h, w):
             raise ValueError(f"{image['name']} is {film.width}x{film.height}, the reference {w}x{h}")
         entries.append({"name": image["name"], "spp": film.spp, "seconds": float(image["seconds"]),
-                        "unit": image["unit"], "mean": pack(film.image()),
-                        "variance": pack(film.variance_of_mean()), "flip": pack(image["flip"])})
+                        "unit": image["unit"], "mean": _float32(film.image()),
+                        "variance": _float32(film.variance_of_mean()), "flip": _float32(image["flip"])})
     films = [reference] + [image["film"] for image in images]
     return {
         "format": "tracer-viewer", "version": FORMAT_VERSION, "scene": scene,
@@ -115,14 +117,43 @@ def viewer_data(scene: str, reference: Film, images: list[dict[str, Any]], expos
     }
 
 
+def _float32(values: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=np.float32)
+
+
+def _json_open(value: dict[str, Any]) -> str:
+    """``value`` as compact JSON without its closing brace, for more fields to follow."""
+    return json.dumps(value, separators=(",", ":"), allow_nan=False)[:-1]
+
+
 def write_viewer(out: Path, document: dict[str, Any] | None) -> list[str]:
     """Write ``viewer_data.js`` (``document``, from :func:`viewer_data`; None: none, the
-    viewer left out) and ``viewer.js`` (which also sorts the table) into ``out``, atomically;
-    returns their names."""
+    viewer left out, and an older one removed) and ``viewer.js`` (which also sorts the table)
+    into ``out``, atomically; returns their names. The data are written an array at a time, so
+    that at most one array's base64 text is in memory beside the arrays (a single json.dumps
+    of the whole would hold several copies of the file)."""
     written = []
-    if document is not None:
-        data = json.dumps(document, separators=(",", ":"), allow_nan=False)
-        write_text(out / DATA_FILE, f"window.TRACER_VIEWER_DATA = {data};\n")
+    if document is None:
+        (out / DATA_FILE).unlink(missing_ok=True)
+    else:
+        def write(tmp: str) -> None:
+            with open(tmp, "w", encoding="ascii", newline="") as fh:
+                fh.write("window.TRACER_VIEWER_DATA = ")
+                fh.write(_json_open({k: v for k, v in document.items() if k != "images"}) + ',"images":[')
+                for n, image in enumerate(document["images"]):
+                    fields = {k: v for k, v in image.items() if k not in ARRAYS}
+                    fh.write(("," if n else "") + _json_open(fields))
+                    for key in ARRAYS:
+                        if image[key] is None:
+                            fh.write(f',"{key}":null')
+                        else:  # three writes: no second copy of the base64 text
+                            fh.write(f',"{key}":"')
+                            fh.write(pack(image[key]))
+                            fh.write('"')
+                    fh.write("}")
+                fh.write("]};\n")
+
+        atomic_write(out / DATA_FILE, write)
         written.append(DATA_FILE)
     write_text(out / SCRIPT_FILE, resources.files(__package__).joinpath(SCRIPT_FILE).read_text("utf-8"))
     return [*written, SCRIPT_FILE]
