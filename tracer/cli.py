@@ -128,7 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("compare", help="compare strategies against a reference: images, maps, charts",
                        description="Render several strategies at equal spp or equal time and compare them "
                        "with a reference: EXR/PNG per strategy, error and FLIP maps, a labelled grid, "
-                       "efficiency-ratio maps, metrics.json/csv and index.html.")
+                       "efficiency-ratio maps, metrics.json/csv and index.html, whose interactive viewer "
+                       "(it opens from disk) flips, zooms and reads out the float images.")
     c.add_argument("scene", help="scene file")
     c.add_argument("--reference", required=True, help="reference EXR (tracer reference)")
     c.add_argument("--strategies", default=",".join(CLASSIC_STRATEGIES),
@@ -162,7 +163,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--seed", type=_seed, default=None,
                    help="random seed (default: the smallest the reference holds no samples of)")
     c.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
-    c.add_argument("--exposure", type=_exposure, default=0.0, help="PNG exposure in stops (default 0)")
+    c.add_argument("--exposure", type=_exposure, default=0.0,
+                   help="exposure in stops of the PNGs, and the viewer's at first (default 0)")
     c.add_argument("--quiet", action="store_true", help="no progress lines")
     c.set_defaults(run=cmd_compare)
 
