@@ -24,11 +24,11 @@
 .viewer-bar button.on { background: #345; color: #fff; border-color: #345; }
 .viewer-bar label { font-size: 0.85em; margin-left: 0.6em; }
 .viewer-bar input[type=number] { width: 4.5em; }
-.viewer-stage { position: relative; background: #1d1d1d; overflow: hidden; cursor: crosshair;
-  user-select: none; }
+.viewer-stage { position: relative; display: inline-block; vertical-align: top; background: #1d1d1d;
+  overflow: hidden; cursor: crosshair; user-select: none; }
 .viewer-stage canvas { display: block; }
 .viewer-caption { position: absolute; left: 6px; top: 4px; color: #fff; font-size: 0.85em;
-  text-shadow: 0 0 3px #000; pointer-events: none; }
+  background: rgba(0, 0, 0, 0.55); padding: 1px 5px; border-radius: 3px; pointer-events: none; }
 .viewer-why { position: absolute; inset: 0; display: flex; align-items: center; justify-content: center;
   color: #ddd; font-size: 0.95em; pointer-events: none; }
 .viewer-scale { display: flex; align-items: center; gap: 0.5em; font-size: 0.8em; margin: 0.3em 0; }
