@@ -26,6 +26,8 @@ import numpy as np
 from ..film import Film
 
 RELMSE_EPSILON = 0.01
+# Efficiency-ratio maps average each pixel's squared error over a (2 r + 1)^2 window, r this.
+EFFICIENCY_RADIUS = 3
 
 
 def mse(image: np.ndarray, reference: np.ndarray, reference_variance: np.ndarray | None = None) -> float:
@@ -96,7 +98,8 @@ def box_blur(image: np.ndarray, radius: int) -> np.ndarray:
 
 
 def efficiency_ratio_map(
-    error_a: np.ndarray, seconds_a: float, error_b: np.ndarray, seconds_b: float, radius: int = 3
+    error_a: np.ndarray, seconds_a: float, error_b: np.ndarray, seconds_b: float,
+    radius: int = EFFICIENCY_RADIUS
 ) -> np.ndarray:
     """Per-pixel log2 of efficiency(a) / efficiency(b), ``(H, W)``.
 

@@ -346,7 +346,7 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
   }
 
   function drawStage() {
-    const [width, height, ratio] = layout();
+    const ratio = layout()[2];
     const context = canvas.getContext("2d");
     context.setTransform(1, 0, 0, 1, 0, 0);
     context.fillStyle = "#1d1d1d";
@@ -360,8 +360,6 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
       context.strokeStyle = "#0f0";
       context.strokeRect(held[0], held[1], 1, 1);
     }
-    void width;
-    void height;
   }
 
   function paintScale() {

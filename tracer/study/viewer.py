@@ -37,8 +37,8 @@ from . import metrics
 DATA_FILE = "viewer_data.js"
 SCRIPT_FILE = "viewer.js"
 FORMAT_VERSION = 1
-# The views other than the image itself: what each shows, on what scale and in what colours
-# (the static maps' ranges: report.RELERR_RANGE and RATIO_RANGE; the variance's is the data's).
+# The colour tables the map views use (each view's range is the static map's: report.RELERR_RANGE
+# and RATIO_RANGE; the variance's comes from the data).
 COLORMAPS = ("magma", "RdBu")
 ARRAYS = ("mean", "variance", "flip")  # each image's packed arrays: (H, W, 3), (H, W, 3), (H, W)
 # Past this much float data (before base64: 4/3 of it as text) a browser takes many seconds and
@@ -101,7 +101,7 @@ def viewer_data(scene: str, reference: Film, images: list[dict[str, Any]], expos
         "format": "tracer-viewer", "version": FORMAT_VERSION, "scene": scene,
         "encoding": "base64 of little-endian float32, row-major (y from the top, x, channel)",
         "width": w, "height": h, "exposure": float(exposure),
-        "relmse_epsilon": metrics.RELMSE_EPSILON, "efficiency_radius": 3,
+        "relmse_epsilon": metrics.RELMSE_EPSILON, "efficiency_radius": metrics.EFFICIENCY_RADIUS,
         "baseline": 1 + (baseline or 0) if images else None,
         "images": entries,
         "views": {
