@@ -485,6 +485,7 @@ def test_seeds_and_sample_indices_past_32_bits_round_trip(tmp_path):
     assert film.record.samples == ((seed, 0, 2),) and film.spp == 2
 
 
+@pytest.mark.slow  # 12 s: slow since tracer 0.8, for the CI budget (Ctrl-C is tested in every run above)
 def test_a_billion_spp_render_has_flat_memory_and_stops_on_ctrl_c(tmp_path):
     """`--spp 1000000000` at 64x64: resident memory between 3 s and 9 s into the render grows
     by less than 40 MiB (the batch plan is lazy and the film fixed-size; a plan built up front

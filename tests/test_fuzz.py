@@ -23,13 +23,14 @@ def run_slice(tmp_path: Path, seed: int, scenes: int, exrs: int, baselines: int)
 
 
 def test_fuzz_slice(tmp_path):
-    """Every outcome of 20 seeded hostile inputs (10 scenes, 6 EXRs, 4 baselines; about 40 s)
+    """Every outcome of 10 seeded hostile inputs (5 scenes, 3 EXRs, 2 baselines; about 15 s; 20
+    until tracer 0.8, halved for the CI budget: test_fuzz_bigger and benchmarks/fuzz.py run more)
     is compared with the bad-input promise: exit 0 with finite EXR/JSON/CSV outputs, or exit 2
     with exactly one stderr line, and in-process only tracer.InputError. It fails when tracer
     prints a traceback, dies from a signal, runs past 120 s, writes NaN or inf, or refuses in
     more or fewer than one line; the inputs are a function of the seed, so a failure repeats
     (`python benchmarks/fuzz.py --seed 0 --only FAMILY:INDEX`) and the report names each one."""
-    run_slice(tmp_path, seed=0, scenes=10, exrs=6, baselines=4)
+    run_slice(tmp_path, seed=0, scenes=5, exrs=3, baselines=2)
 
 
 @pytest.mark.slow
