@@ -651,13 +651,7 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
         images["Per-pixel efficiency ratio (where each strategy wins)"] = ratio_files
     # The viewer's efficiency view compares with the first pair's second run by default.
     baseline = next(i for i, r in enumerate(runs) if r is pairs[0][1]) if pairs else None
-    size = viewer.data_bytes(reference.width, reference.height, len(runs))
-    omitted = None
-    if size > viewer.MAX_DATA_BYTES:
-        omitted = (f"The interactive viewer was left out: its data would be {size / 2**20:.0f} MiB of "
-                   f"floats, more than the {viewer.MAX_DATA_BYTES / 2**20:.0f} MiB a browser loads in "
-                   "reasonable time (compare fewer strategies or a smaller reference for one). The static "
-                   "images below show the same comparison.")
+    omitted = viewer.omission(reference.width, reference.height, len(runs))
     viewer.write_viewer(out, None if omitted else viewer.viewer_data(
         scene_name, reference, viewed, exposure, RELERR_RANGE, RATIO_RANGE, baseline))
 
@@ -683,7 +677,8 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
         document["allocation"] = rows
         images["MIS sample allocation (light : BSDF)"] = [
             allocation_chart(rows, out / "allocation.png", clock, formats)]
-    document["viewer"] = {"data_bytes": size, "written": omitted is None}
+    document["viewer"] = {"data_bytes": viewer.data_bytes(reference.width, reference.height, len(runs)),
+                          "written": omitted is None}
     write_tables(out, document)
     write_index(out, document, images, omitted)
     return document

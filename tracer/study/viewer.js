@@ -381,9 +381,18 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
     rangeHigh.value = high;
   }
 
+  // A pan or zoom only draws the stage and the readout again (it runs on every mouse move of a
+  // drag); a change of image, view or setting also paints the texture and the controls.
   function redraw(repaint) {
-    if (repaint) paintTexture();
+    if (repaint) {
+      paintTexture();
+      refreshControls();
+    }
     drawStage();
+    showReadout();
+  }
+
+  function refreshControls() {
     paintScale();
     for (const button of imageBar.children) {
       button.classList.toggle("on", Number(button.dataset.index) === state.image);
@@ -400,7 +409,6 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
     caption.textContent = `${state.image + 1}: ${image.name} (${image.spp} spp${time}) — ` +
       VIEWS.find((v) => v.id === state.view).title +
       (state.view === "image" ? `, exposure ${state.exposure >= 0 ? "+" : ""}${state.exposure}` : "");
-    showReadout();
   }
 
   // ------------------------------------------------------------------------------------------

@@ -65,10 +65,11 @@ def colormap_table(name: str) -> list[list[int]]:
     return np.rint(table * 255.0).astype(int).tolist()
 
 
-def _log_variance_range(films: list[Film]) -> list[float]:
+def _log_variance_range(variances: list[np.ndarray]) -> list[float]:
     """The variance view's default range: log10 of the variance of the pixel mean (channel
-    mean) from its 1st to its 99.5th percentile over every image's nonzero pixels."""
-    logs = [np.log10(v[v > 0.0]) for v in (f.variance_of_mean().mean(axis=1) for f in films)]
+    mean of each ``(..., 3)`` array) from its 1st to its 99.5th percentile over every image's
+    nonzero pixels."""
+    logs = [np.log10(v[v > 0.0]) for v in (v.mean(axis=-1, dtype=np.float64) for v in variances)]
     logs = np.concatenate(logs) if logs else np.zeros(0)
     if logs.size == 0:
         return [-6.0, 0.0]
@@ -96,7 +97,6 @@ def viewer_data(scene: str, reference: Film, images: list[dict[str, Any]], expos
         entries.append({"name": image["name"], "spp": film.spp, "seconds": float(image["seconds"]),
                         "unit": image["unit"], "mean": _float32(film.image()),
                         "variance": _float32(film.variance_of_mean()), "flip": _float32(image["flip"])})
-    films = [reference] + [image["film"] for image in images]
     return {
         "format": "tracer-viewer", "version": FORMAT_VERSION, "scene": scene,
         "encoding": "base64 of little-endian float32, row-major (y from the top, x, channel)",
@@ -110,7 +110,7 @@ def viewer_data(scene: str, reference: Film, images: list[dict[str, Any]], expos
             "flip": {"range": [0.0, 1.0], "colormap": "magma", "label": "FLIP error (OpenImageIO)"},
             "efficiency": {"range": [-float(ratio_range), float(ratio_range)], "colormap": "RdBu",
                            "label": "log2 efficiency ratio (blue: this image wins)"},
-            "variance": {"range": _log_variance_range(films), "colormap": "magma",
+            "variance": {"range": _log_variance_range([e["variance"] for e in entries]), "colormap": "magma",
                          "label": "log10 variance of the pixel mean (σ²/spp), mean of RGB"},
         },
         "colormaps": {name: colormap_table(name) for name in COLORMAPS},
@@ -173,22 +173,27 @@ def data_bytes(width: int, height: int, renders: int) -> int:
     return width * height * (24 * (renders + 1) + 4 * renders)
 
 
+def omission(width: int, height: int, renders: int) -> str | None:
+    """Why a comparison's viewer is left out (its data past ``MAX_DATA_BYTES``), or None."""
+    size = data_bytes(width, height, renders)
+    if size <= MAX_DATA_BYTES:
+        return None
+    return (f"The interactive viewer was left out: its data would be {size / 2**20:.0f} MiB of floats, "
+            f"more than the {MAX_DATA_BYTES / 2**20:.0f} MiB a browser loads in reasonable time (compare "
+            "fewer strategies or a smaller reference for one). The static images below show the same "
+            "comparison.")
+
+
 def section_html(table: str, omitted: str | None = None) -> str:
     """The page's viewer: an empty frame that ``viewer.js`` fills, beside ``table`` (the metrics
     table, HTML, which the script makes sortable), and what a reader without scripts sees; or,
     where the data were left out, ``omitted``: why (HTML)."""
-    if omitted is not None:
-        return f"""<div class="viewer-layout">
-<div id="tracer-viewer" class="viewer" data-omitted="true"><p>{omitted}</p></div>
-<div class="viewer-side">{table}</div>
-</div>
-<script src="{SCRIPT_FILE}"></script>
-"""
-    return f"""<div class="viewer-layout">
-<div id="tracer-viewer" class="viewer"><noscript><p>The interactive viewer needs JavaScript; the
-static images below show the same comparison.</p></noscript></div>
-<div class="viewer-side">{table}</div>
-</div>
-<script src="{DATA_FILE}"></script>
-<script src="{SCRIPT_FILE}"></script>
-"""
+    if omitted is None:
+        frame = ('<div id="tracer-viewer" class="viewer"><noscript><p>The interactive viewer needs '
+                 "JavaScript; the static images below show the same comparison.</p></noscript></div>")
+        scripts = [DATA_FILE, SCRIPT_FILE]
+    else:
+        frame = f'<div id="tracer-viewer" class="viewer" data-omitted="true"><p>{omitted}</p></div>'
+        scripts = [SCRIPT_FILE]  # it still sorts the table
+    tags = "".join(f'<script src="{name}"></script>\n' for name in scripts)
+    return f'<div class="viewer-layout">\n{frame}\n<div class="viewer-side">{table}</div>\n</div>\n{tags}'
