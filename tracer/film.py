@@ -160,6 +160,12 @@ def _fold(count, mean, m2, pixel, n_b, mean_b, m2_b) -> None:
     n = n_a + n_b
     if n == 0:
         return
+    if n_a == 0:  # exactly the other's statistics (the formula would give inf x 0 for a huge mean)
+        count[pixel] = n_b
+        for c in range(3):
+            mean[pixel, c] = mean_b[c]
+            m2[pixel, c] = m2_b[c]
+        return
     share = n_b / n
     for c in range(3):
         delta = mean_b[c] - mean[pixel, c]

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import interrupts, samplers, tuning
+from . import interrupts, merge_tree, samplers, tuning
 from .errors import InputError
 from .estimators import DirectLighting
 from .film import Film
@@ -177,23 +177,11 @@ def _zero_nonfinite(radiance: np.ndarray) -> int:
     return count
 
 
-def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Film | None = None,
-           progress: bool = False, estimator: DirectLighting | None = None,
-           learner: tuning.Learner | None = None) -> RenderResult:
-    """Render ``settings.spp`` samples per pixel into ``film`` (a new one if None).
-
-    The film's record (``tracer.record``) is set to describe all it holds: the strategy and
-    sampler, the scene's digest, the sample ranges a film passed in held plus the one drawn now,
-    and the seconds of both. A film that already holds samples must have been made by the same
-    estimator and sampler on the same scene, and must not hold any of the samples to be drawn
-    (``InputError`` otherwise: its record could not say what the film holds). Ctrl-C stops the
-    render, also during the first compilation: batches already running
-    finish and are kept, the rest are dropped, and the result says ``interrupted``.
-
-    An estimator that learns between passes starts from ``learner`` (the ``learner`` of the
-    result of a render this one continues, as ``compare`` continues renders to fill a time
-    budget), else from nothing, with a pilot pass.
-    """
+def film_to_fill(scene: Scene, strategy: Strategy, settings: RenderSettings,
+                 film: Film | None) -> tuple[Film, RenderRecord | None]:
+    """Check a render's settings, and that ``film`` (a new one if None) may take its samples:
+    raises ``InputError`` otherwise. Returns the film and the record of what it already held
+    (None if nothing)."""
     last = settings.first_sample + settings.spp
     if settings.sampler not in samplers.SAMPLERS:
         raise InputError(f"unknown sampler {settings.sampler!r}; expected one of "
@@ -208,10 +196,9 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     cam = scene.camera
     replicates = samplers.replicates_of(settings.sampler)
     film = film if film is not None else Film(cam.width, cam.height, replicates=replicates)
-    runs = estimator.strategy if estimator is not None else strategy
     earlier = film.record if bool(film.count.any()) else None
     if earlier is not None:
-        _check_continues(earlier, scene, runs, settings)
+        _check_continues(earlier, scene, strategy, settings)
     if film.replicates != replicates:
         raise InputError(f"cannot add {settings.sampler} samples to a film of {film.replicates} replicates "
                          f"(the {settings.sampler} sampler keeps {replicates})")
@@ -221,7 +208,37 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         raise InputError(f"{settings.spp} spp more would put over {MAX_REPLICATE_COUNT} samples in a "
                          f"replicate of the {settings.sampler} sampler, more than its render file counts "
                          "exactly")
-    count_before = film.count.copy()  # to tell, if interrupted, how many sample indices were drawn
+    return film, earlier
+
+
+def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Film | None = None,
+           progress: bool = False, estimator: DirectLighting | None = None,
+           learner: tuning.Learner | None = None, part: merge_tree.Node | None = None) -> RenderResult:
+    """Render ``settings.spp`` samples per pixel into ``film`` (a new one if None).
+
+    The film's record (``tracer.record``) is set to describe all it holds: the strategy and
+    sampler, the scene's digest, the sample ranges a film passed in held plus the one drawn now,
+    and the seconds of both. A film that already holds samples must have been made by the same
+    estimator and sampler on the same scene, and must not hold any of the samples to be drawn
+    (``InputError`` otherwise: its record could not say what the film holds). Ctrl-C stops the
+    render, also during the first compilation: batches already running
+    finish and are kept, the rest are dropped, and the result says ``interrupted``.
+
+    An estimator that learns between passes starts from ``learner`` (the ``learner`` of the
+    result of a render this one continues, as ``compare`` continues renders to fill a time
+    budget), else from nothing, with a pilot pass.
+
+    The new samples are pooled along the render's merge tree (``tracer.merge_tree``) and the
+    pool is then merged into ``film``. ``part``, a node of that tree, renders only its leaves
+    (a task of a distributed render, ``tracer.cluster``): with the same random numbers and the
+    same bits as the whole render has there. Estimators that learn cannot render a part: what
+    they apply depends on every earlier sample.
+    """
+    cam = scene.camera
+    runs = estimator.strategy if estimator is not None else strategy
+    fresh = film is None  # then the pool of the new samples becomes the film
+    film, earlier = film_to_fill(scene, runs, settings, film)
+    replicates = film.replicates
     sampler = samplers.make(settings.sampler, settings.seed, settings.first_sample, settings.spp)
     bar = None
     nonfinite = 0
@@ -231,11 +248,18 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     seconds = 0.0
 
     continues = learner is not None
+    k = pass_samples(settings.spp, cam.width * cam.height, runs.samples_per_lane)
+    tree = merge_tree.layout(settings.spp, k)
+    first, stop = tree.samples(part) if part is not None else (0, settings.spp)
+    if part is not None and (runs.learns or first >= stop):
+        learns = f" with {runs.label}, which learns from every earlier sample" if runs.learns else ""
+        raise InputError(f"cannot render part {part} of a render of {tree.leaves} leaves{learns}")
+    leaf = LeafFilm(tree, cam.width, cam.height, replicates, merge_tree.Pool(tree.leaves, pooled_into))
 
     def merge(batch: Batch, result: tuple[np.ndarray, int, np.ndarray | None]) -> None:
         nonlocal nonfinite, samples
         block, bad, sums = result
-        film.add_block(batch.first_pixel, block, batch.first_sample)
+        leaf.add_block(batch, block, settings.first_sample)
         if sums is not None:
             learner.add(batch.first_pixel, sums)
         nonfinite += bad
@@ -248,22 +272,20 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         # The strategy the estimator was built for is the one that runs. A batch casts at most
         # 2 x batch_lanes rays from its shading points (or one pixel's pass, if that is more),
         # so that --light-samples 10000 shrinks the batches instead of exhausting memory.
-        per_sample = runs.samples_per_lane
-        lanes = max(1, settings.batch_lanes * 2 // max(2, per_sample))
-        k = pass_samples(settings.spp, cam.width * cam.height, per_sample)
-        batches = plan_batches(cam.width, cam.height, settings.spp, settings.first_sample, lanes, k)
+        lanes = max(1, settings.batch_lanes * 2 // max(2, runs.samples_per_lane))
+        batches = plan_batches(cam.width, cam.height, stop - first, settings.first_sample + first, lanes, k)
         # numba's compiler cannot take a KeyboardInterrupt (one that lands in LLVM's callbacks
         # leaves it broken): a signal during the compilation stops the render right after it.
         with interrupts.deferred("tracer: interrupted; stopping as soon as the kernels are compiled"
                                  if progress else None) as arrived:
-            _compile(estimator, film, sampler)
+            _compile(estimator, leaf.film, sampler)
         if arrived:
             raise KeyboardInterrupt
         # Compiling takes ~20 s; loading from the cache up to a few seconds on a loaded machine.
         if progress and time.perf_counter() - start > 5.0:
             print(f"tracer: compiled the shading kernels in {time.perf_counter() - start:.1f} s "
                   "(once after an install or an edit; later runs load them from the cache)", file=sys.stderr)
-        bar = _progress_bar(cam.width * cam.height * settings.spp, progress)
+        bar = _progress_bar(cam.width * cam.height * (stop - first), progress)
         start = time.perf_counter()
         if estimator.learns and learner is None:
             plan = estimator.plan
@@ -306,13 +328,72 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     finally:
         if bar is not None:
             bar.close()
+    pooled = leaf.finish(complete=not interrupted)
     # Each pixel holds a prefix of its new indices (batches start in plan order and every
     # started one is merged), so an interrupted render drew first .. first + (most added) - 1.
-    drawn = int((film.count - count_before).max()) if interrupted and len(film.count) else settings.spp
-    film.record = _record(scene, runs, settings, drawn, seconds, earlier)
+    drawn = stop - first
+    if interrupted:
+        drawn = int(pooled.count.max()) if pooled is not None and len(pooled.count) else 0
+    if pooled is not None and fresh:
+        film = pooled
+    elif pooled is not None:
+        film.merge(pooled)
+    film.record = _record(scene, runs, settings, first, drawn, seconds, earlier)
     if learner is not None:
         film.learned = learner.maps()
     return RenderResult(film, seconds, samples, nonfinite, interrupted, learner)
+
+
+def pooled_into(a: Film, b: Film) -> Film:
+    """``a`` with ``b`` merged into it: the merge of the merge tree (``tracer.merge_tree``)."""
+    a.merge(b)
+    return a
+
+
+class LeafFilm:
+    """The leaf of the merge tree that batches are being folded into, and the pool it goes to.
+
+    Batches come in plan order; the first batch of a new leaf hands the finished one to the
+    pool (``merge_tree.Pool``) and starts a fresh film.
+    """
+
+    def __init__(self, tree: merge_tree.Layout, width: int, height: int, replicates: int,
+                 pool: merge_tree.Pool):
+        self.tree, self.pool = tree, pool
+        self.shape = (width, height, replicates)
+        self.index: int | None = None
+        self.film = self._fresh()
+
+    def _fresh(self) -> Film:
+        width, height, replicates = self.shape
+        return Film(width, height, replicates=replicates)
+
+    def add_block(self, batch: Batch, block: np.ndarray, first_sample: int) -> None:
+        """Fold a batch's samples ``(npix, k, 3)``; ``first_sample`` is the render's first index."""
+        index = self.tree.leaf_of(batch.first_sample - first_sample)
+        if index != self.index:
+            self._close()
+            self.index = index
+        self.film.add_block(batch.first_pixel, block, batch.first_sample)
+
+    def _close(self) -> None:
+        if self.index is not None:
+            self.pool.add((self.index, 1), self.film)
+            self.film = self._fresh()
+        self.index = None
+
+    def finish(self, complete: bool) -> Film | None:
+        """The samples folded, pooled (None if none): along the tree if ``complete``, else (a
+        render cut short) with the leaf being filled merged last, as it holds a prefix of pixels."""
+        partial = None
+        if complete:
+            self._close()
+        elif self.index is not None:
+            partial, self.index = self.film, None
+        pooled = self.pool.result()
+        if partial is not None:
+            pooled = partial if pooled is None else pooled_into(pooled, partial)
+        return pooled
 
 
 def render_complete(scene: Scene, strategy: Strategy, settings: RenderSettings, **options) -> RenderResult:
@@ -335,11 +416,11 @@ def _check_continues(earlier: RenderRecord, scene: Scene, strategy: Strategy,
     check_mergeable(earlier, new, "the film", "the samples to add")
 
 
-def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, drawn: int, seconds: float,
-            earlier: RenderRecord | None) -> RenderRecord:
+def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, offset: int, drawn: int,
+            seconds: float, earlier: RenderRecord | None) -> RenderRecord:
     """The record of a film after a render that drew ``drawn`` sample indices from
-    ``settings.first_sample`` into it: the new range joined to the ``earlier`` record's."""
-    record = RenderRecord.of_render(strategy, settings.sampler, settings.seed, settings.first_sample,
+    ``settings.first_sample + offset`` into it: the new range joined to the ``earlier`` record's."""
+    record = RenderRecord.of_render(strategy, settings.sampler, settings.seed, settings.first_sample + offset,
                                     drawn, seconds, scene)
     return merged(record, earlier) if earlier is not None else record
 

@@ -203,6 +203,12 @@ class Strategy:
         return self.allocation == "adaptive"
 
     @property
+    def learns(self) -> bool:
+        """Renders learn between passes (``tracer.tuning``), so that every pass depends on all
+        the samples before it: they cannot be cut into independent tasks."""
+        return self.learns_control_variate or self.adaptive
+
+    @property
     def learns_control_variate(self) -> bool:
         """Optimal MIS with several samples per technique: the estimator adds a control variate
         whose coefficient is learned per pixel (``tracer.tuning``). With one-sample MIS the
