@@ -7,6 +7,7 @@ Exit status: 0 done, 1 a check failed, 2 bad input (one line on stderr, no trace
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 from pathlib import Path
@@ -42,6 +43,7 @@ MAX_SPP = 2**53
 _spp = _int_in(1, MAX_SPP)
 _seed = _int_in(0, 2**64 - 1)
 _threads = _int_in(1, 1024)
+_workers = _int_in(1, 1024)
 _samples_per_camera_sample = _int_in(0, 1_000_000)
 _ris_candidates = _int_in(1, 1_000_000)
 
@@ -121,6 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_strategy_options(ref)
     _add_sampler_option(ref, resumed=True)
     _add_render_options(ref)
+    _add_cluster_options(ref, tasks="the sample range is cut into tasks of disjoint sample indices, pooled "
+                         "in a fixed order: the same image, bit for bit, as without", task_spp=True)
     # None = not given: a resume takes these from the file, a new reference the usual defaults.
     ref.set_defaults(run=cmd_reference, heuristic=None, light_samples=None, bsdf_samples=None,
                      one_sample=None, light_selection=None, light_sampling=None, allocation=None)
@@ -166,6 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--exposure", type=_exposure, default=0.0,
                    help="exposure in stops of the PNGs, and the viewer's at first (default 0)")
     c.add_argument("--quiet", action="store_true", help="no progress lines")
+    _add_cluster_options(c, tasks="each strategy (and each seed of a sweep) renders as a task on one thread "
+                         "of a worker, timed there")
     c.set_defaults(run=cmd_compare)
 
     ch = sub.add_parser("check", help="regression-test noise levels and bias against a baseline",
@@ -206,6 +212,8 @@ def build_parser() -> argparse.ArgumentParser:
     ch.add_argument("--seed-offset", type=_seed, default=0,
                     help="add this to every seed (other random numbers, same statistics)")
     ch.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
+    _add_cluster_options(ch, tasks="every render of an entry and seed is a task (each on one thread); "
+                         "the references of --create render here")
     ch.set_defaults(run=cmd_check)
 
     pr = sub.add_parser("primer", help="Monte Carlo primer: five exercises, each a table and a figure",
@@ -375,6 +383,30 @@ def _add_render_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--exposure", type=_exposure, default=0.0,
                    help="PNG preview exposure in stops (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary line")
+
+
+def _add_cluster_options(p: argparse.ArgumentParser, tasks: str, task_spp: bool = False) -> None:
+    """--workers and --scheduler (exclusive), and for a reference --task-spp: run on Dask."""
+    g = p.add_argument_group("on a Dask cluster (pip install 'tracer[cluster]')", tasks)
+    where = g.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_workers, metavar="N",
+                       help="start a local Dask cluster of N single-threaded worker processes")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="use the existing Dask cluster whose scheduler is at ADDRESS (tcp://host:8786)")
+    if task_spp:
+        g.add_argument("--task-spp", type=_spp, metavar="N",
+                       help="samples per pixel of a task, rounded down to a power-of-two number of the "
+                       "render's leaves (default: about 4 tasks per worker thread); the image does not "
+                       "depend on it")
+
+
+def _cluster(args: argparse.Namespace):
+    """A Dask client for --workers or --scheduler (tracer.cluster.connect), or None for neither."""
+    if args.workers is None and args.scheduler is None:
+        return contextlib.nullcontext()
+    from .cluster import connect
+
+    return connect(args.workers, args.scheduler)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -638,10 +670,17 @@ def cmd_reference(args: argparse.Namespace) -> int:
         sampler = sampler or scene.render_defaults.get("sampler", DEFAULT_SAMPLER)
     settings = RenderSettings(spp=args.spp, seed=seed, threads=args.threads, first_sample=first,
                               sampler=sampler)
-    try:
-        result = render(scene, strategy, settings, film=film, progress=not args.quiet)
-    except InputError as exc:
-        raise InputError(f"--resume: {exc}" if film is not None else str(exc), str(output)) from None
+    with _cluster(args) as client:
+        try:
+            if client is None:
+                result = render(scene, strategy, settings, film=film, progress=not args.quiet)
+            else:
+                from .cluster import render_distributed
+
+                result = render_distributed(client, scene, strategy, settings, film=film,
+                                            progress=not args.quiet, task_spp=args.task_spp)
+        except InputError as exc:
+            raise InputError(f"--resume: {exc}" if film is not None else str(exc), str(output)) from None
     return _finish(result, scene, strategy, output, args.spp, args.quiet, args.exposure,
                    half=not args.float)
 
@@ -727,10 +766,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
     comparison = Comparison(scene, reference, seeds[0], args.threads, progress=not args.quiet,
                             clock=args.clock)
 
-    def run(strategy, sampler=DEFAULT_SAMPLER):
+    def run(strategy, sampler=DEFAULT_SAMPLER):  # a call of Comparison.perform
         if args.time:
-            return comparison.equal_time(strategy, args.time, sampler)
-        return comparison.equal_spp(strategy, args.spp, sampler)
+            return "equal_time", (strategy, args.time, sampler)
+        return "equal_spp", (strategy, args.spp, sampler)
 
     # Every strategy with every light sampling and selection asked for (those without light
     # samples once), and ris with every candidate count and source.
@@ -765,19 +804,20 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(f"{scene.name}: {mode['description']} at {reference.width}x{reference.height}", file=sys.stderr)
     try:
-        runs = [run(strategy, sampler) for strategy in strategies for sampler in sampler_names]
-        sweep, allocation = [], []
-        if args.sweep:
-            for strategy in strategies:
-                for sampler in sampler_names:
-                    sweep += comparison.sweep(strategy, seeds, max_spp=args.spp, budget=args.time,
-                                              sampler=sampler)
-            first_sampling = _strategy_from(args, "mis", samplings[0]).light_sampling
-            allocation = [run(Strategy("mis", classic[0], n_light, n_bsdf,
+        with _cluster(args) as client:
+            calls = [run(strategy, sampler) for strategy in strategies for sampler in sampler_names]
+            if args.sweep:
+                first_sampling = _strategy_from(args, "mis", samplings[0]).light_sampling
+                calls += [run(Strategy("mis", classic[0], n_light, n_bsdf,
                                        light_selection=args.light_selection[0],
-                                       light_sampling=first_sampling),
-                              sampler_names[0])
+                                       light_sampling=first_sampling), sampler_names[0])
                           for n_light, n_bsdf in ALLOCATIONS]
+            results = comparison.perform(calls, client)
+            count = len(strategies) * len(sampler_names)
+            runs, allocation = results[:count], results[count:]
+            items = [(strategy, sampler) for strategy in strategies for sampler in sampler_names]
+            sweep = comparison.sweeps(items, seeds, max_spp=args.spp, budget=args.time,
+                                      client=client) if args.sweep else []
     except KeyboardInterrupt:
         # A strategy cut short would be compared at less time or fewer samples than the others.
         print(f"tracer: interrupted: the comparison is incomplete, nothing written to {out}", file=sys.stderr)
@@ -823,6 +863,11 @@ def _warn_if_reference_is_noisy(reference_relmse: float, runs, reference_path: s
 
 
 def cmd_check(args: argparse.Namespace) -> int:
+    with _cluster(args) as client:
+        return _check(args, client)
+
+
+def _check(args: argparse.Namespace, client) -> int:
     from .study.check import create_baseline, default_baseline, format_table, parse_strategies, run_check
 
     create_options = {"--scenes": args.scenes, "--strategies": args.strategies, "--spp": args.spp,
@@ -844,7 +889,8 @@ def cmd_check(args: argparse.Namespace) -> int:
         result = create_baseline(args.create, args.scenes.split(","), parse_strategies(args.strategies),
                                  spp=args.spp or 16, seeds=args.seeds or 8,
                                  reference_spp=args.reference_spp or 1024, size=args.size or 64,
-                                 threads=args.threads, sampler=args.sampler or DEFAULT_SAMPLER)
+                                 threads=args.threads, sampler=args.sampler or DEFAULT_SAMPLER,
+                                 client=client)
         print(f"baseline written: {args.create} ({len(result.measurements)} entries); check with "
               f"tracer check --baseline {args.create}", file=sys.stderr)
         return 0
@@ -852,7 +898,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     if not args.baseline:
         print(f"baseline: {baseline}", file=sys.stderr)
     result = run_check(baseline, update=args.update, out=_output_folder(args.out),
-                       seed_offset=args.seed_offset, threads=args.threads)
+                       seed_offset=args.seed_offset, threads=args.threads, client=client)
     if args.update:
         print(f"baseline written: {baseline} ({len(result.measurements)} entries)", file=sys.stderr)
         return 0

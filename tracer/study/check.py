@@ -83,7 +83,7 @@ from ..atomic import write_text
 from ..errors import InputError
 from ..film import Film, merge_renders
 from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
-from ..render_loop import RenderSettings, render_complete
+from ..render_loop import RenderResult, RenderSettings, render_complete
 from ..sampler_choice import DEFAULT_SAMPLER, SAMPLERS, replicates_of
 from ..scene import Scene, default_scene_path, load_scene
 from ..strategy import (
@@ -428,8 +428,22 @@ def downsampled_reference(reference: Film, factor: int, half: bool) -> tuple[np.
     return mean.reshape(-1, 3), var_mean.reshape(-1, 3), var_sample.reshape(-1, 3)
 
 
-def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) -> Measurement:
-    """Render the entry once per seed and measure it against its reference."""
+@dataclass
+class _Setup:
+    """What measuring an entry needs besides its renders (``render_jobs``, ``measured``)."""
+
+    entry: Entry
+    scene: Scene
+    ref_mean: np.ndarray
+    ref_var: np.ndarray
+    ref_sample_var: np.ndarray
+    parts: int
+
+
+def render_jobs(entry: Entry, base: Path, seed_offset: int = 0,
+                threads: int = 2) -> tuple[_Setup, list[tuple[Scene, Strategy, RenderSettings]]]:
+    """The renders ``(scene, strategy, settings)`` that measure ``entry``: per seed, ``parts``
+    renders of consecutive sample indices (``replicates_per_seed``), and what ``measured`` needs."""
     ref_path = base / entry.reference_key()
     reference = read_exr(ref_path)
     f = entry.downsample
@@ -448,25 +462,36 @@ def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) ->
     ref_mean, ref_var, ref_sample_var = downsampled_reference(reference, f, exr_is_half(ref_path))
     strategy = entry.strategy_object()
     parts = replicates_per_seed(entry.spp, entry.sampler)
+    # Sample indices j spp/parts, ...: together the seed's spp samples.
+    jobs = [(scene, strategy, RenderSettings(spp=entry.spp // parts, seed=seed + seed_offset,
+                                             first_sample=j * (entry.spp // parts), threads=threads,
+                                             sampler=entry.sampler))
+            for seed in entry.seeds for j in range(parts)]
+    return _Setup(entry, scene, ref_mean, ref_var, ref_sample_var, parts), jobs
+
+
+def measured(setup: _Setup, results: list[RenderResult]) -> Measurement:
+    """The measurement of an entry from the results of its ``render_jobs``, in their order."""
     films: list[Film] = []
     pooled: Film | None = None
-    relmse, variance, seconds = [], [], 0.0
-    for seed in entry.seeds:
+    relmse, variance = [], []
+    for i in range(0, len(results), setup.parts):
         film: Film | None = None
-        for j in range(parts):  # sample indices j spp/parts, ...: together the seed's spp samples
-            settings = RenderSettings(spp=entry.spp // parts, seed=seed + seed_offset,
-                                      first_sample=j * (entry.spp // parts), threads=threads,
-                                      sampler=entry.sampler)
-            result = render_complete(scene, strategy, settings)
+        for result in results[i:i + setup.parts]:
             films.append(result.film)
             film = result.film if film is None else merge_renders(film, result.film)
-            seconds += result.seconds
-        relmse.append(metrics.relmse(film.mean, ref_mean))
+        relmse.append(metrics.relmse(film.mean, setup.ref_mean))
         variance.append(metrics.variance(film))
         # Distinct seeds: the pool's record lists each seed's range (record.merged).
         pooled = film if pooled is None else merge_renders(pooled, film)
-    return Measurement(np.array(relmse), np.array(variance), films, pooled, ref_mean, ref_var,
-                       ref_sample_var, scene, seconds)
+    return Measurement(np.array(relmse), np.array(variance), films, pooled, setup.ref_mean, setup.ref_var,
+                       setup.ref_sample_var, setup.scene, sum(r.seconds for r in results))
+
+
+def measure(entry: Entry, base: Path, seed_offset: int = 0, threads: int = 2) -> Measurement:
+    """Render the entry once per seed and measure it against its reference."""
+    setup, jobs = render_jobs(entry, base, seed_offset, threads)
+    return measured(setup, [render_complete(*job) for job in jobs])
 
 
 def replicates_per_seed(spp: int, sampler: str = DEFAULT_SAMPLER) -> int:
@@ -701,11 +726,13 @@ def run_check(
     threads: int = 2,
     stream=sys.stderr,
     entries: list[Entry] | None = None,
+    client=None,
 ) -> CheckResult:
     """Measure every entry; with ``update`` check and rewrite the baseline, else judge
     against it.
 
     On failure, the failing entries' image, reference, error and p-value maps go to ``out``.
+    With a Dask ``client`` (``tracer.cluster``) each entry's seeds render as tasks.
     """
     baseline = Path(baseline)
     entries = entries if entries is not None else load_baseline(baseline)
@@ -720,7 +747,7 @@ def run_check(
                 raise InputError("no image_means to judge against; run tracer check --update", str(baseline),
                                  f"entries[{i}]")
     result = CheckResult()
-    _measure_all(entries, baseline.parent, seed_offset, threads, stream, result)
+    _measure_all(entries, baseline.parent, seed_offset, threads, stream, result, client)
     if update:
         _write_update(baseline, entries, result, stream)
         return result
@@ -730,9 +757,22 @@ def run_check(
     return result
 
 
-def _measure_all(entries, base: Path, seed_offset: int, threads: int, stream, result: CheckResult) -> None:
+def _measure_all(entries, base: Path, seed_offset: int, threads: int, stream, result: CheckResult,
+                 client=None) -> None:
+    """Measure every entry: here one render after the other, or with a Dask ``client`` every
+    entry's renders at once, as tasks (``tracer.cluster``)."""
+    if client is not None:
+        from ..cluster import map_tasks, render_whole
+
+        prepared = [render_jobs(e, base, seed_offset, threads) for e in entries]
+        results = map_tasks(client, render_whole, [job for _, jobs in prepared for job in jobs],
+                            progress=stream is not None)
+        done = 0
+        for setup, jobs in prepared:
+            result.measurements[setup.entry.name] = measured(setup, results[done:done + len(jobs)])
+            done += len(jobs)
     for e in entries:
-        m = measure(e, base, seed_offset, threads)
+        m = result.measurements[e.name] if client is not None else measure(e, base, seed_offset, threads)
         result.measurements[e.name] = m
         if stream is not None:
             print(
@@ -786,8 +826,10 @@ def create_baseline(
     threads: int = 2,
     stream=sys.stderr,
     sampler: str = DEFAULT_SAMPLER,
+    client=None,
 ) -> CheckResult:
-    """Write a new baseline at ``path`` for every scene x strategy, with MIS references.
+    """Write a new baseline at ``path`` for every scene x strategy, with MIS references (the
+    entries' renders as Dask tasks with a ``client``; the references here).
 
     Each scene's reference is rendered at ``size`` pixels on its longer side (the check's
     resolution, so ``downsample`` is 1) with ``reference_spp`` MIS samples of seed 0 and saved as
@@ -841,7 +883,7 @@ def create_baseline(
     for _, file, ref in prepared:
         make_reference(file, folder / ref, size, reference_spp, threads, stream)
     result = CheckResult()
-    _measure_all(entries, folder, 0, threads, stream, result)
+    _measure_all(entries, folder, 0, threads, stream, result, client)
     _write_update(path, entries, result, stream)
     return result
 

@@ -29,6 +29,7 @@ import copy
 import dataclasses
 import sys
 import time
+import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -221,6 +222,7 @@ class Comparison:
         self.clock = clock
         self.caster = RayCaster(scene.vertices, scene.faces)
         self._warm: set[Strategy] = set()
+        self.token = uuid.uuid4().hex  # names this comparison to the workers that keep a copy of it
 
     def _estimator(self, strategy: Strategy) -> DirectLighting:
         return DirectLighting(self.scene, strategy, self.caster)
@@ -348,20 +350,59 @@ class Comparison:
             target *= 2
         return points
 
+    def perform(self, calls: list[tuple[str, tuple]], client=None) -> list:
+        """The results of method calls ``(name, args)`` of this comparison (``equal_spp``,
+        ``equal_time``, ``convergence``): here one after the other, or with a Dask ``client`` all
+        at once, each a task on one thread of a worker (``tracer.cluster``), timed there."""
+        if client is None:
+            return [getattr(self, name)(*args) for name, args in calls]
+        from ..cluster import map_tasks
+
+        return map_tasks(client, comparison_call,
+                         [(self.token, self.scene, self.reference, self.seed, self.clock, name, args)
+                          for name, args in calls], progress=self.progress)
+
+    def sweeps(self, items: list[tuple[Strategy, str]], seeds: list[int], max_spp: int | None = None,
+               budget: float | None = None, client=None) -> list[dict[str, Any]]:
+        """:meth:`convergence` for every ``(strategy, sampler)`` of ``items`` and every seed, each
+        strategy's seeds up to the same spp: its first seed's sweep decides it (``max_spp``, or as
+        far as the ``budget`` goes), so that each point has every seed and the mean over seeds is
+        taken at the same spp. The first seeds run first (as tasks with a ``client``), then
+        the others."""
+        first = self.perform([("convergence", (strategy, max_spp, budget, seeds[0], sampler))
+                              for strategy, sampler in items], client)
+        rest = self.perform([("convergence", (strategy, points[-1]["spp"], None, seed, sampler))
+                             for (strategy, sampler), points in zip(items, first, strict=True)
+                             for seed in seeds[1:]], client)
+        out: list[dict[str, Any]] = []
+        others = len(seeds) - 1
+        for i, ((strategy, sampler), points) in enumerate(zip(items, first, strict=True)):
+            points = points + [p for seed_points in rest[i * others:(i + 1) * others] for p in seed_points]
+            last = points[-1]["spp"]
+            spent = sum(p["seconds"] for p in points if p["spp"] == last)
+            self._say(f"  sweep {_described(strategy, sampler)}: {len(seeds)} seeds x "
+                      f"{len(points) // len(seeds)} points up to {last} spp, {spent:.2f} {self.unit}")
+            out += points
+        return out
+
     def sweep(self, strategy: Strategy, seeds: list[int], max_spp: int | None = None,
               budget: float | None = None, sampler: str = DEFAULT_SAMPLER) -> list[dict[str, Any]]:
-        """:meth:`convergence` once per seed, every seed up to the same spp: the first seed's
-        sweep decides it (``max_spp``, or as far as the ``budget`` goes), so that each point
-        has every seed and the mean over seeds is taken at the same spp."""
-        points = self.convergence(strategy, max_spp, budget, seeds[0], sampler)
-        last = points[-1]["spp"]
-        for seed in seeds[1:]:
-            points += self.convergence(strategy, last, None, seed, sampler)
-        spent = sum(p["seconds"] for p in points if p["spp"] == last)
-        per_seed = len(points) // len(seeds)
-        self._say(f"  sweep {_described(strategy, sampler)}: {len(seeds)} seeds x {per_seed} points up to "
-                  f"{last} spp, {spent:.2f} {self.unit}")
-        return points
+        """:meth:`sweeps` of one strategy and sampler, here."""
+        return self.sweeps([(strategy, sampler)], seeds, max_spp, budget)
+
+
+# Each worker keeps the comparison of the last task it ran (its Embree scene, the reference's
+# variance), so that the tasks after the first one of a comparison do not rebuild them.
+_WORKER_COMPARISON: dict[str, Comparison] = {}
+
+
+def comparison_call(token: str, scene: Scene, reference: Film, seed: int, clock: str, name: str,
+                    args: tuple) -> Any:
+    """A task (``Comparison.perform``): method ``name`` of the comparison ``token`` on one thread."""
+    if token not in _WORKER_COMPARISON:
+        _WORKER_COMPARISON.clear()
+        _WORKER_COMPARISON[token] = Comparison(scene, reference, seed, threads=1, clock=clock)
+    return getattr(_WORKER_COMPARISON[token], name)(*args)
 
 
 def _described(strategy: Strategy, sampler: str) -> str:

@@ -1,0 +1,213 @@
+"""Renders on Dask's local cluster of 2 worker processes (``tracer.cluster``).
+
+Bit-identity is the contract here (``tracer.merge_tree``, tested without Dask in
+test_merge_tree.py): a render pooled from tasks of any size, finished in any order, on workers
+that may die, must equal the render in one process bit for bit. Films are compared with
+``np.array_equal``, never a tolerance.
+
+The Dask tests skip when ``distributed`` is not installed, unless ``TRACER_CLUSTER_TESTS=required``
+(as ``.ci/run`` sets, installing the ``cluster`` extra), where they fail instead.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tracer import merge_tree
+from tracer import scene as scene_mod
+from tracer.imagefiles import read_exr
+from tracer.render_loop import RenderSettings, pass_samples, pooled_into, render
+from tracer.strategy import Strategy
+
+from test_merge_tree import same_film, small_scene
+
+REQUIRED = os.environ.get("TRACER_CLUSTER_TESTS") == "required"
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _distributed():
+    try:
+        import distributed
+    except ImportError:
+        if REQUIRED:
+            raise
+        pytest.skip("Dask's distributed is not installed (pip install '.[cluster]')")
+    return distributed
+
+
+@pytest.fixture(scope="module")
+def client():
+    _distributed()
+    from tracer.cluster import connect
+
+    with connect(workers=2) as dask_client:
+        yield dask_client
+
+
+def test_distributed_reference_is_the_local_one_bit_for_bit(client):
+    """render_distributed on 2 worker processes, for two task sizes and the default, equals the
+    single-process render of the same seed bit for bit (mean, M2, counts), and its record lists
+    the whole sample range once."""
+    from tracer.cluster import render_distributed
+
+    scene = small_scene()
+    strategy = Strategy("mis")
+    k = pass_samples(10**6, 32 * 24, strategy.samples_per_lane)
+    settings = RenderSettings(spp=20 * k + 3, seed=3, threads=2)
+    local = render(scene, strategy, settings).film
+    for task_spp in (k, 4 * k, None):
+        result = render_distributed(client, scene, strategy, settings, task_spp=task_spp)
+        assert not result.interrupted
+        assert same_film(result.film, local), task_spp
+        assert result.film.record.samples == ((3, 0, settings.spp),)
+
+
+def test_distributed_stratified_reference_with_replicates(client):
+    """The stratified sampler's replicate means pool along the same tree: bit for bit too."""
+    from tracer.cluster import render_distributed
+
+    scene = small_scene()
+    settings = RenderSettings(spp=600, seed=2, threads=2, sampler="stratified")
+    local = render(scene, Strategy("mis"), settings).film
+    got = render_distributed(client, scene, Strategy("mis"), settings, task_spp=128).film
+    assert same_film(got, local)
+
+
+def test_a_worker_killed_mid_render_has_its_tasks_rerun(client):
+    """SIGKILL of a worker process while its tasks run: Dask reruns them elsewhere with the same
+    sample indices, and the image is still the single-process render bit for bit (a sample
+    counted twice or lost would change the counts and the means). The kill is checked to have
+    landed while the render ran and while the worker held tasks."""
+    from tracer.cluster import render_distributed
+
+    scene = small_scene(64, 48)
+    strategy = Strategy("mis")
+    settings = RenderSettings(spp=3000, seed=11, threads=2)
+    local = render(scene, strategy, settings).film
+    pids = client.run(os.getpid)
+    out = {}
+
+    def run():
+        out["result"] = render_distributed(client, scene, strategy, settings, task_spp=100)
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    victim = None
+    deadline = time.monotonic() + 60
+    while victim is None and time.monotonic() < deadline and thread.is_alive():
+        busy = {address: tasks for address, tasks in client.processing().items() if tasks}
+        if busy:
+            victim = next(iter(busy))
+            os.kill(pids[victim], signal.SIGKILL)
+        else:
+            time.sleep(0.01)
+    assert victim is not None, "no worker was ever seen working"
+    assert thread.is_alive(), "the render ended before the kill"
+    thread.join(180)
+    assert not thread.is_alive()
+    assert same_film(out["result"].film, local)
+    assert out["result"].film.record.samples == ((11, 0, 3000),)
+    client.wait_for_workers(2, timeout=60)
+    assert pids[victim] not in client.run(os.getpid).values()
+
+
+def test_ctrl_c_during_a_distributed_reference_writes_exactly_the_finished_tasks(tmp_path):
+    """SIGINT to ``tracer reference --workers 2`` once some tasks are done: exit 130, the EXR
+    is written, and it holds exactly the tasks whose results arrived: every pixel holds the
+    samples its record lists (no task half in), fewer than asked, and the film is those tasks'
+    nodes rendered here and pooled, bit for bit."""
+    _distributed()
+    scene_path = scene_mod.default_scene_path()
+    out = tmp_path / "ref.exr"
+    k = pass_samples(10**6, 32 * 24, Strategy("mis").samples_per_lane)
+    spp, task_spp = 400 * k, 4 * k
+    argv = ["reference", str(scene_path), "--width", "32", "--height", "24", "--spp", str(spp),
+            "--workers", "2", "--task-spp", str(task_spp), "--float", "-o", str(out)]
+    proc = subprocess.Popen([sys.executable, "-m", "tracer", *argv], cwd=tmp_path, stderr=subprocess.PIPE,
+                            text=True)
+    lines = []
+    for line in proc.stderr:
+        lines.append(line)
+        if "tasks done" in line:
+            proc.send_signal(signal.SIGINT)
+            break
+    rest = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 130, "".join(lines) + rest
+    film = read_exr(out)
+    ranges = film.record.samples
+    held = sum(stop - first for _, first, stop in ranges)
+    assert 0 < held < spp
+    assert np.all(film.count == held)
+    # The same nodes, rendered here and pooled along the tree, give the same bits.
+    tree = merge_tree.layout(spp, pass_samples(spp, 32 * 24, Strategy("mis").samples_per_lane))
+
+    def held_whole(node):
+        first, stop = tree.samples(node)
+        return any(a <= first and stop <= b for _, a, b in ranges)
+
+    nodes = [node for node in merge_tree.task_nodes(tree.leaves, task_spp // tree.leaf_spp)
+             if held_whole(node)]
+    assert sum(b - a for a, b in map(tree.samples, nodes)) == held
+    scene = small_scene()
+    pool = merge_tree.Pool(tree.leaves, pooled_into)
+    settings = RenderSettings(spp=spp, seed=0, threads=2)
+    for node in nodes:
+        pool.add(node, render(scene, Strategy("mis"), settings, part=node).film)
+    # The file stores 32-bit floats (--float): the pooled means rounded to them, bit for bit.
+    pooled = pool.result()
+    assert np.array_equal(pooled.count, film.count)
+    assert np.array_equal(pooled.mean.astype(np.float32), film.mean.astype(np.float32))
+
+
+def test_cluster_options_without_dask_say_how_to_install(tmp_path, monkeypatch):
+    """Without distributed, --workers is one line naming the extra to install, exit 2."""
+    from tracer import cli
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed raises ImportError
+    code = cli.main(["reference", str(scene_mod.default_scene_path()), "--workers", "2", "--spp", "8",
+                     "-o", str(tmp_path / "r.exr")])
+    assert code == 2
+
+
+def test_compare_tasks_give_the_local_comparison(client):
+    """Comparison.perform with a client (each strategy, and each seed of a sweep, a task on one
+    worker thread) gives the same images, counts and relMSE as the calls run here, in the same
+    order: timing differs, numbers of samples do not."""
+    from tracer.study.compare import Comparison
+
+    scene = small_scene()
+    reference = render(scene, Strategy("mis"), RenderSettings(spp=64, seed=0, threads=2)).film
+    comparison = Comparison(scene, reference, seed=1, threads=2)
+    calls = [("equal_spp", (Strategy("light"), 16, "independent")),
+             ("equal_spp", (Strategy("bsdf"), 16, "stratified"))]
+    local, remote = comparison.perform(calls), comparison.perform(calls, client)
+    for a, b in zip(local, remote, strict=True):
+        assert a.strategy == b.strategy and same_film(a.film, b.film)
+        assert a.measures["relmse"] == b.measures["relmse"]
+    items = [(Strategy("mis"), "independent")]
+    here = comparison.sweeps(items, [1, 2, 3], max_spp=8)
+    there = comparison.sweeps(items, [1, 2, 3], max_spp=8, client=client)
+    strip = [{k: v for k, v in p.items() if k not in ("seconds", "efficiency")} for p in here]
+    assert strip == [{k: v for k, v in p.items() if k not in ("seconds", "efficiency")} for p in there]
+
+
+def test_check_tasks_measure_what_the_local_check_measures(client):
+    """run_check with a client (each entry's seeds as tasks) measures the shipped baseline's
+    entry exactly as without: the same per-seed relMSE and variance, the same pooled film."""
+    from tracer.study.check import load_baseline, run_check
+
+    baseline = ROOT / "renders" / "noise_baseline.json"
+    entries = [e for e in load_baseline(baseline) if e.name == "cornell/light"]
+    here = run_check(baseline, stream=None, entries=entries).measurements["cornell/light"]
+    there = run_check(baseline, stream=None, entries=entries, client=client).measurements["cornell/light"]
+    assert np.array_equal(here.relmse, there.relmse) and np.array_equal(here.variance, there.variance)
+    assert same_film(here.pooled, there.pooled)
