@@ -7,6 +7,7 @@ bit is a broken merge order, not noise. The same parts on a Dask cluster: tests/
 
 from __future__ import annotations
 
+import dataclasses
 import random
 
 import numpy as np
@@ -15,7 +16,7 @@ import pytest
 from tracer import merge_tree
 from tracer import scene as scene_mod
 from tracer.errors import InputError
-from tracer.render_loop import RenderSettings, pass_samples, pooled_into, render
+from tracer.render_loop import RenderSettings, pass_samples, pooled_into, render, tree_layout
 from tracer.strategy import Strategy
 
 
@@ -88,32 +89,47 @@ def _leaf_expression(start, size):
     return f"({_leaf_expression(start, half)}+{_leaf_expression(start + half, half)})"
 
 
-@pytest.mark.parametrize("sampler", ["independent", "stratified"])
-def test_parts_pooled_in_any_order_are_the_whole_render(sampler):
+@pytest.mark.parametrize("sampler, max_leaves", [("independent", 4096), ("stratified", 4096),
+                                                  ("independent", 4)])
+def test_parts_pooled_in_any_order_are_the_whole_render(sampler, max_leaves, monkeypatch):
     """Parts of a render (``render(part=...)``: what a Dask task renders) for two task sizes,
     pooled in shuffled order, equal the whole render on two threads bit for bit; with a resumed
-    sample range (first_sample > 0) and a last leaf cut short (spp not a multiple of the leaf)."""
+    sample range (first_sample > 0), a last leaf cut short (spp not a multiple of the leaf), and
+    (MAX_LEAVES lowered to 4, as a million-spp render has) leaves of several passes."""
+    monkeypatch.setattr(merge_tree, "MAX_LEAVES", max_leaves)
     scene = small_scene()
     strategy = Strategy("mis")
     k = pass_samples(10**6, 32 * 24, strategy.samples_per_lane)
-    spp = 12 * k + 5  # 13 leaves, the last one short
+    spp = 12 * k + 5  # 13 passes, the last one short
     settings = RenderSettings(spp=spp, seed=7, threads=2, first_sample=16, sampler=sampler)
     whole = render(scene, strategy, settings).film
-    tree = merge_tree.layout(spp, pass_samples(spp, 32 * 24, strategy.samples_per_lane))
-    assert tree.leaves == 13
+    tree = tree_layout(scene, strategy, settings)
+    assert (tree.leaves, tree.leaf_passes) == ((13, 1) if max_leaves > 13 else (4, 4))
     for task_leaves in (1, 4):
         nodes = merge_tree.task_nodes(tree.leaves, task_leaves)
         random.Random(task_leaves).shuffle(nodes)
         pool = merge_tree.Pool(tree.leaves, pooled_into)
         ranges = []
         for node in nodes:
-            part = render(scene, strategy, RenderSettings(spp=spp, seed=7, threads=1, first_sample=16,
-                                                         sampler=sampler), part=node).film
+            part = render(scene, strategy, dataclasses.replace(settings, threads=1), part=node).film
             pool.add(node, part)
             ranges += part.record.samples
         assert same_film(pool.result(), whole), task_leaves
         first, stop = 16, 16 + spp
         assert sorted(ranges)[0][1] == first and sum(c - b for _, b, c in ranges) == stop - first
+    with pytest.raises(InputError, match="not a node"):
+        render(scene, strategy, settings, part=(1, 2))  # not aligned
+
+
+def test_pool_refuses_leaves_twice():
+    """A node whose leaves the pool holds already (alone or merged into a parent), or of a size
+    that is not a power of two, is refused: it would count samples twice or break the order."""
+    pool = merge_tree.Pool(8, lambda a, b: a + b)
+    pool.add((0, 1), 1)
+    pool.add((1, 1), 1)  # merged into (0, 2)
+    for node in ((0, 1), (1, 1), (0, 4), (0, 3)):
+        with pytest.raises(ValueError):
+            pool.add(node, 1)
 
 
 def test_strategies_that_learn_are_not_cut_into_parts():

@@ -670,19 +670,37 @@ def cmd_reference(args: argparse.Namespace) -> int:
         sampler = sampler or scene.render_defaults.get("sampler", DEFAULT_SAMPLER)
     settings = RenderSettings(spp=args.spp, seed=seed, threads=args.threads, first_sample=first,
                               sampler=sampler)
+    on_cluster = args.workers is not None or args.scheduler is not None
+    if args.task_spp is not None and not on_cluster:
+        raise InputError("--task-spp sizes the tasks of --workers or --scheduler", "command line")
+    if on_cluster and strategy.learns:
+        raise InputError(f"{strategy.label} learns between passes from every earlier sample, so its passes "
+                         "are not independent tasks: leave out --workers and --scheduler", "command line")
+    # The files are written before a local cluster shuts down: its shutdown takes seconds, and a
+    # second Ctrl-C then must not cost the finished work.
     with _cluster(args) as client:
-        try:
-            if client is None:
+        if client is None:
+            try:
                 result = render(scene, strategy, settings, film=film, progress=not args.quiet)
-            else:
-                from .cluster import render_distributed
+            except InputError as exc:
+                raise InputError(f"--resume: {exc}" if film is not None else str(exc), str(output)) from None
+            return _finish(result, scene, strategy, output, args.spp, args.quiet, args.exposure,
+                           half=not args.float)
+        from .cluster import ClusterLost, render_distributed
 
-                result = render_distributed(client, scene, strategy, settings, film=film,
-                                            progress=not args.quiet, task_spp=args.task_spp)
+        try:
+            result = render_distributed(client, scene, strategy, settings, film=film,
+                                        progress=not args.quiet, task_spp=args.task_spp)
+        except ClusterLost as exc:
+            # Keep what finished, as an interrupt does, then say what failed.
+            if exc.result is not None and exc.result.samples:
+                _finish(exc.result, scene, strategy, output, args.spp, args.quiet, args.exposure,
+                        half=not args.float)
+            raise
         except InputError as exc:
             raise InputError(f"--resume: {exc}" if film is not None else str(exc), str(output)) from None
-    return _finish(result, scene, strategy, output, args.spp, args.quiet, args.exposure,
-                   half=not args.float)
+        return _finish(result, scene, strategy, output, args.spp, args.quiet, args.exposure,
+                       half=not args.float)
 
 
 def cmd_merge(args: argparse.Namespace) -> int:

@@ -3,14 +3,16 @@
 A render's samples are addressed by (seed, pixel, sample index), so it splits into tasks of
 disjoint sample indices: each task renders one node of the render's merge tree
 (``tracer.merge_tree``: a power-of-two block of leaves) into a film, with the random numbers the
-whole render would draw there, and the driver pools the task films along the same tree as they
-arrive. The result is the same, bit for bit, as the render in one process, whatever the task
-size, the number of workers and the order tasks finish in.
+whole render would draw there, and merge tasks pool sibling nodes along the same tree as they
+finish, on the workers, up to the tree's few pieces, which the driver pools. The result is the
+same, bit for bit, as the render in one process, whatever the task size, the number of workers
+and the order tasks finish in.
 
 Dask does the scheduling: a local cluster of worker processes (``--workers N``) or an existing
 cluster (``--scheduler ADDRESS``: SSH, Kubernetes, an HPC job queue). A task is a pure function
 of its arguments, so when a worker dies Dask runs its task again elsewhere with the same sample
-indices; a sample is pooled only from a task whose result arrived, once. The scene travels to
+indices (and a lost finished film is computed again the same way); a sample is pooled only
+from a node that finished, once. The scene travels to
 the workers by content (the loaded ``Scene``, meshes included, scattered once), never by path.
 Tasks render on one thread each: a worker with T threads runs T tasks at once.
 
@@ -23,7 +25,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
+import signal
 import sys
+import threading
 import time
 import uuid
 from collections.abc import Iterator, Sequence
@@ -37,22 +41,32 @@ from .record import merged
 from .render_loop import (
     RenderResult,
     RenderSettings,
-    _progress_bar,
     film_to_fill,
-    pass_samples,
-    pooled_into,
+    progress_bar,
     render,
     render_complete,
+    tree_layout,
 )
 from .scene import Scene
 from .strategy import Strategy
 
-INSTALL_HINT = "pip install 'tracer[cluster]' (Dask's distributed scheduler)"
+INSTALL_HINT = ("install Dask's distributed scheduler: pip install \".[cluster]\" in tracer's source folder, "
+                "or pip install \"dask[distributed]\"")
 # Tasks per worker thread a render is cut into by default: enough that a slow or lost worker
 # delays the end by a small share, few enough that each task's fixed cost (a film sent back and
 # merged, a few milliseconds at 256x256) stays small against its rendering.
 TASKS_PER_THREAD = 4
 CONNECT_TIMEOUT = "20s"
+GATHER_TIMEOUT = 60.0  # seconds to fetch a finished film after Ctrl-C or a failure
+
+
+class ClusterLost(InputError):
+    """The Dask cluster failed (a scheduler gone, a task that keeps killing its workers).
+    ``result`` holds what finished before, pooled, for the caller to keep (None if nothing)."""
+
+    def __init__(self, message: str, result: RenderResult | None = None):
+        super().__init__(message, "--workers/--scheduler")
+        self.result = result
 
 
 def _distributed():
@@ -78,13 +92,56 @@ def connect(workers: int | None = None, scheduler: str | None = None) -> Iterato
             raise InputError(f"cannot reach the Dask scheduler at {scheduler!r}: {exc}",
                              "--scheduler") from None
         with client:
+            try:
+                client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+            except TimeoutError:
+                raise InputError(f"the Dask scheduler at {scheduler!r} has no workers (waited "
+                                 f"{CONNECT_TIMEOUT})", "--scheduler") from None
+            _check_workers(client)
             yield client
         return
-    # Worker processes log to stderr; only their errors are worth a user's attention.
-    with distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
-            distributed.Client(cluster) as client:
+    # The worker processes ignore SIGINT (they inherit SIG_IGN, which survives exec): a Ctrl-C at
+    # the terminal reaches the whole process group, and the driver alone must handle it, taking
+    # the finished films from the workers before it shuts them down.
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if _main_thread() else None
+    try:
+        # Worker processes log to stderr; only their errors are worth a user's attention.
+        # The dashboard on a free port: a second local cluster would warn that 8787 is taken.
+        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                           dashboard_address=":0", silence_logs=logging.ERROR)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+    with cluster, distributed.Client(cluster) as client:
         yield client
+
+
+def _main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+def _worker_identity() -> tuple[str, str]:
+    """tracer's version and source digest on a worker (``connect`` compares them)."""
+    from . import __version__, jit
+
+    return __version__, jit.source_digest().hex()
+
+
+def _check_workers(client) -> None:
+    """Refuse a cluster whose workers run another tracer than this one: their samples would be
+    mixed with ours silently."""
+    here = _worker_identity()
+    try:
+        there = client.run(_worker_identity)
+    except Exception as exc:  # a worker without tracer cannot even unpickle the function
+        raise InputError(f"cannot run tracer on the Dask workers ({type(exc).__name__}: {exc}); install "
+                         f"tracer {here[0]} on every worker", "--scheduler") from None
+    other = {address: identity for address, identity in there.items() if tuple(identity) != here}
+    if other:
+        address, (version, digest) = next(iter(other.items()))
+        raise InputError(f"{len(other)} Dask worker(s) run another tracer ({address}: version {version}, "
+                         f"sources {digest[:12]}; here {here[0]}, {here[1][:12]}): install this one on "
+                         "every worker", "--scheduler")
 
 
 def worker_threads(client) -> int:
@@ -102,27 +159,53 @@ def task_leaves(tree: merge_tree.Layout, threads: int, task_spp: int | None = No
     return 1 << (wanted.bit_length() - 1)
 
 
-# Each worker keeps the estimator (its Embree scene and light tables) of the last render it
-# worked on, so that the tasks after the first one do not build it again. The key holds the
+# Each worker keeps the estimators (Embree scene, light tables) of the last few renders it worked
+# on, so that the tasks after the first one do not build them again. The key holds the
 # resolution, which the scene's digest leaves out (the estimator casts its camera's rays).
-_ESTIMATOR: dict[tuple[str, int, int, Strategy], DirectLighting] = {}
+_ESTIMATORS: dict[tuple[str, int, int, Strategy], DirectLighting] = {}
+_ESTIMATORS_KEPT = 4
+_CACHE_LOCK = threading.Lock()  # a worker runs one task per thread
 
 
 def _estimator(scene: Scene, strategy: Strategy) -> DirectLighting:
     key = (scene.digest, scene.camera.width, scene.camera.height, strategy)
-    if key not in _ESTIMATOR:
-        _ESTIMATOR.clear()
-        _ESTIMATOR[key] = DirectLighting(scene, strategy)
-    return _ESTIMATOR[key]
+    with _CACHE_LOCK:
+        if key not in _ESTIMATORS:
+            while len(_ESTIMATORS) >= _ESTIMATORS_KEPT:
+                del _ESTIMATORS[next(iter(_ESTIMATORS))]
+            _ESTIMATORS[key] = DirectLighting(scene, strategy)
+        return _ESTIMATORS[key]
 
 
-def render_part(scene: Scene, strategy: Strategy, settings: RenderSettings,
-                part: merge_tree.Node) -> tuple[Film, int, int]:
-    """A task: node ``part`` of the render ``settings`` on one thread. Returns its film, the count
-    of samples that were not finite, and the samples rendered."""
+# What a task of a distributed render gives back: its film, the count of samples that were not
+# finite, and the samples rendered.
+Part = tuple[Film, int, int]
+
+
+def render_part(scene: Scene, strategy: Strategy, settings: RenderSettings, part: merge_tree.Node) -> Part:
+    """A task: node ``part`` of the render ``settings`` on one thread."""
     settings = dataclasses.replace(settings, threads=1)
     result = render(scene, strategy, settings, estimator=_estimator(scene, strategy), part=part)
     return result.film, result.nonfinite, result.samples
+
+
+def merge_parts(left: Part, right: Part) -> Part:
+    """A task: two sibling nodes of the merge tree pooled as the tree says (``left`` with ``right``
+    merged in, as ``render_loop.pooled_into`` does locally), into a copy: Dask may still hold
+    ``left`` for a Ctrl-C."""
+    film = left[0].copy()
+    film.merge(right[0])
+    film.record = merged(left[0].record, right[0].record)
+    return film, left[1] + right[1], left[2] + right[2]
+
+
+def _pool_in_order(parts: list[Part]) -> Part:
+    """Disjoint nodes (in leaf order) pooled one after the other: the pieces of a whole render, as
+    the tree says, or the finished nodes of one cut short."""
+    pooled = parts[0]
+    for part in parts[1:]:
+        pooled = merge_parts(pooled, part)
+    return pooled
 
 
 def render_distributed(client, scene: Scene, strategy: Strategy, settings: RenderSettings,
@@ -130,72 +213,106 @@ def render_distributed(client, scene: Scene, strategy: Strategy, settings: Rende
                        task_spp: int | None = None) -> RenderResult:
     """:func:`tracer.render_loop.render` on a Dask cluster: the same film, bit for bit.
 
-    Ctrl-C (or SIGTERM) cancels the tasks not finished; the film then holds exactly the tasks
-    whose results arrived, and its record lists their sample ranges. Strategies that learn
-    between passes (optimal MIS, adaptive allocation) are refused: each pass depends on all the
-    samples before it.
+    Tasks render nodes of the render's merge tree; merge tasks pool sibling nodes on the workers
+    as they finish, up to the tree's pieces, so that the driver receives a few films, not one per
+    task, and Dask frees a node's film once its parent holds it. Ctrl-C (or SIGTERM) cancels what
+    has not finished; the film then pools the largest finished nodes, exactly the tasks that
+    finished, and its record lists their sample ranges. Strategies that learn between passes
+    (optimal MIS, adaptive allocation) are refused: each pass depends on all the samples before it.
     """
     if strategy.learns:
         raise InputError(f"{strategy.label} learns between passes from every earlier sample, so its "
-                         "passes are not independent tasks: render it without --workers or --scheduler",
-                         "command line")
+                         "passes are not independent tasks: render it without --workers or --scheduler")
     fresh = film is None
     film, earlier = film_to_fill(scene, strategy, settings, film)
     cam = scene.camera
-    k = pass_samples(settings.spp, cam.width * cam.height, strategy.samples_per_lane)
-    tree = merge_tree.layout(settings.spp, k)
+    tree = tree_layout(scene, strategy, settings)
     threads = worker_threads(client)
-    nodes = merge_tree.task_nodes(tree.leaves, task_leaves(tree, threads, task_spp))
+    per_task = task_leaves(tree, threads, task_spp)
+    nodes = merge_tree.task_nodes(tree.leaves, per_task)
     first, stop = tree.samples(nodes[0])
     if progress:
         print(f"tracer: {len(nodes)} tasks of up to {stop - first} spp on {threads} worker threads "
               f"(Dask scheduler {client.scheduler.address})", file=sys.stderr)
-    pool: merge_tree.Pool[Film] = merge_tree.Pool(tree.leaves, pooled_into)
-    records = []
-    nonfinite = samples = 0
     interrupted = False
     start = time.perf_counter()
-    bar = _progress_bar(cam.width * cam.height * settings.spp, progress)
-    futures = []
+    bar = progress_bar(cam.width * cam.height * settings.spp, progress)
+    futures: dict[merge_tree.Node, Any] = {}
+    children: dict[merge_tree.Node, tuple[merge_tree.Node, merge_tree.Node]] = {}
+    parts: list[Part] = []
+    lost: ClusterLost | None = None
     try:
-        shared_scene = client.scatter(scene, broadcast=True, hash=False)
         prefix = f"tracer-render-{uuid.uuid4().hex}"
-        futures = [client.submit(render_part, shared_scene, strategy, settings, node,
-                                 key=f"{prefix}-{node[0]}") for node in nodes]
-        node_of = {future.key: node for future, node in zip(futures, nodes, strict=True)}
-        for future, result in _completed(futures):
-            part, bad, count = result
-            with interrupts.deferred() as arrived:  # a task's film is pooled whole or not at all
-                pool.add(node_of[future.key], part)
-                records.append(part.record)
-                nonfinite += bad
-                samples += count
-            if arrived:
-                raise KeyboardInterrupt
-            if bar is not None:
-                bar.update(count)
-            elif progress:
-                _log_progress(len(records), len(nodes))
-    except KeyboardInterrupt:
+        shared_scene = _sent(client, scene, f"{prefix}-scene")
+        for node in nodes:
+            futures[node] = client.submit(render_part, shared_scene, strategy, settings, node,
+                                          key=f"{prefix}-part-{node[0]}-{node[1]}")
+        for parent, left, right in merge_tree.merges(tree.leaves, per_task):
+            futures[parent] = client.submit(merge_parts, futures[left], futures[right],
+                                            key=f"{prefix}-merge-{parent[0]}-{parent[1]}")
+            children[parent] = (left, right)
+        node_of = {future.key: node for node, future in futures.items()}
+        tasks = set(nodes)
+        done = 0
+        for future, _ in _completed(list(futures.values()), with_results=False):
+            node = node_of[future.key]
+            if node in tasks:
+                done += 1
+                if bar is not None:
+                    bar.update(cam.width * cam.height * (tree.samples(node)[1] - tree.samples(node)[0]))
+                elif progress:
+                    _log_progress(done, len(nodes))
+            for child in children.get(node, ()):
+                del futures[child]  # its parent holds its samples now: Dask may free it
+        parts = client.gather([futures[piece] for piece in merge_tree.pieces(tree.leaves)])
+    except (KeyboardInterrupt, ClusterLost) as exc:
         interrupted = True
-        with contextlib.suppress(Exception):
-            client.cancel(futures)
+        lost = exc if isinstance(exc, ClusterLost) else None
+        parts = _gather_finished(client, tree, futures, children)
     finally:
         if bar is not None:
             bar.close()
     seconds = time.perf_counter() - start
-    pooled = pool.result()
-    if pooled is not None:
-        record = records[0]
-        for other in records[1:]:
-            record = merged(record, other)
-        pooled.record = dataclasses.replace(record, seconds=seconds)
+    samples = nonfinite = 0
+    if parts:
+        pooled, nonfinite, samples = _pool_in_order(parts)
+        pooled.record = dataclasses.replace(pooled.record, seconds=seconds)
         if fresh:
             film = pooled
         else:
             film.merge(pooled)
-            film.record = merged(earlier, pooled.record) if earlier is not None else pooled.record
-    return RenderResult(film, seconds, samples, nonfinite, interrupted)
+            film.record = merged(pooled.record, earlier) if earlier is not None else pooled.record
+    result = RenderResult(film, seconds, samples, nonfinite, interrupted)
+    if lost is not None:
+        raise ClusterLost(str(lost), result if parts else None)
+    return result
+
+
+def _gather_finished(client, tree: merge_tree.Layout, futures: dict, children: dict) -> list[Part]:
+    """After Ctrl-C or a lost cluster: cancel what has not finished and fetch the largest finished
+    nodes, in leaf order (every finished task lies in exactly one). A film the cluster can no
+    longer give is left out, with the samples it held."""
+    with interrupts.deferred():
+        finished = [node for piece in merge_tree.pieces(tree.leaves)
+                    for node in _finished_under(piece, futures, children)]
+        with contextlib.suppress(Exception):
+            client.cancel([f for node, f in futures.items() if node not in finished])
+        parts = []
+        for node in finished:
+            with contextlib.suppress(Exception):
+                parts.append(futures[node].result(timeout=GATHER_TIMEOUT))
+        return parts
+
+
+def _finished_under(node: merge_tree.Node, futures: dict, children: dict) -> list[merge_tree.Node]:
+    """The largest finished nodes of the subtree under ``node``, in leaf order."""
+    future = futures.get(node)
+    if future is not None and future.status == "finished":
+        return [node]
+    if node not in children:
+        return []
+    left, right = children[node]
+    return _finished_under(left, futures, children) + _finished_under(right, futures, children)
 
 
 def _log_progress(done: int, total: int) -> None:
@@ -204,50 +321,68 @@ def _log_progress(done: int, total: int) -> None:
         print(f"tracer: {done} of {total} tasks done", file=sys.stderr, flush=True)
 
 
-def _completed(futures) -> Iterator[tuple[Any, Any]]:
-    """``(future, result)`` as tasks finish; a task that failed or was cancelled raises its error."""
+def _completed(futures, with_results: bool = True) -> Iterator[tuple[Any, Any]]:
+    """``(future, result)`` as tasks finish (result None unless ``with_results``: the data stay on
+    the workers). A task that raised raises its error here (a worker's ``InputError`` stays one);
+    one the cluster lost (a worker killed too often, the scheduler gone, its inputs lost) raises
+    ``ClusterLost``."""
     distributed = _distributed()
-    for future, result in distributed.as_completed(futures, with_results=True, raise_errors=False):
+    finished = distributed.as_completed(futures, with_results=with_results, raise_errors=False)
+    for item in finished:
+        future, result = item if with_results else (item, None)
         if future.status != "finished":
             try:
-                future.result()  # raises the task's exception (a worker's InputError stays one)
-            except (distributed.KilledWorker, distributed.comm.CommClosedError, OSError) as exc:
-                # The cluster failed, not the render: one line, as for a failing disk.
-                raise InputError(f"the Dask cluster lost task {future.key}: {type(exc).__name__}: {exc}",
-                                 "--workers/--scheduler") from None
-            raise InputError(f"Dask task {future.key} ended as {future.status}", "--workers/--scheduler")
+                future.result()
+            except (distributed.KilledWorker, distributed.CancelledError, distributed.comm.CommClosedError,
+                    OSError) as exc:
+                raise ClusterLost(f"the Dask cluster lost task {future.key}: {type(exc).__name__}: "
+                                  f"{exc}") from None
+            raise ClusterLost(f"Dask task {future.key} ended as {future.status}")
         yield future, result
+
+
+def _sent(client, value, key: str):
+    """``value`` as a Dask future that any worker can compute again (a task returning it, so the
+    value is in the graph): a scattered value is lost with the last worker holding it."""
+    return client.submit(_identity, value, key=key, pure=False)
+
+
+def _identity(value):
+    return value
 
 
 def map_tasks(client, function, calls: Sequence[tuple], progress: bool = False) -> list:
     """``function(*call)`` for each of ``calls`` as Dask tasks: the results in the order of
     ``calls``. Scenes and films among the arguments are sent to the workers once each, by content,
     however many tasks take them. Raises ``KeyboardInterrupt`` on Ctrl-C, after cancelling the
-    tasks; a task's exception is raised here (an ``InputError`` stays one)."""
+    tasks; a task's exception is raised here (an ``InputError`` stays one, a lost cluster is
+    ``ClusterLost``)."""
     prefix = f"tracer-{getattr(function, '__name__', 'task')}-{uuid.uuid4().hex}"
-    futures = []
+    pending: dict[str, Any] = {}
     sent: dict[int, Any] = {}
 
     def shared(value):
         if not isinstance(value, (Scene, Film)):
             return value
         if id(value) not in sent:
-            sent[id(value)] = client.scatter(value, broadcast=True, hash=False)
+            sent[id(value)] = _sent(client, value, f"{prefix}-input-{len(sent)}")
         return sent[id(value)]
 
-    bar = _progress_bar(len(calls), progress)
+    bar = progress_bar(len(calls), progress, unit="task")
+    keys = [f"{prefix}-{index}" for index in range(len(calls))]
     try:
-        futures = [client.submit(function, *map(shared, call), key=f"{prefix}-{index}")
-                   for index, call in enumerate(calls)]
+        for key, call in zip(keys, calls, strict=True):
+            pending[key] = client.submit(function, *map(shared, call), key=key)
         results: dict[str, Any] = {}
-        for future, result in _completed(futures):
+        for future, result in _completed(list(pending.values())):
             results[future.key] = result
+            del pending[future.key]  # its result is here: the workers may let it go
             if bar is not None:
                 bar.update(1)
-        return [results[future.key] for future in futures]
+        return [results[key] for key in keys]
     except KeyboardInterrupt:
         with contextlib.suppress(Exception):
-            client.cancel(futures)
+            client.cancel(list(pending.values()))
         raise
     finally:
         if bar is not None:

@@ -15,10 +15,10 @@ So every render pools its samples along one tree that depends only on the render
   size / 2)`` with node ``(start + size / 2, size / 2)`` merged into it;
 - the render is the first piece with the others merged into it, in order.
 
-A render on one machine pools its leaves as they come, holding at most one pending node per
-level (a binary counter: log2 of the leaves, 12 films at most). A distributed render gives each
-task a node of this tree (``task_nodes``), and the driver pools the nodes in whatever order they
-arrive into the same tree (:class:`Pool`), so both give the same bits, whatever the task size.
+A render on one machine pools its leaves as they come (:class:`Pool`), holding at most one
+pending node per level (a binary counter: log2 of the leaves, 12 films at most). A distributed
+render gives each task a node of this tree (``task_nodes``) and merges sibling nodes as they
+finish, up to the pieces (``merges``), so both give the same bits, whatever the task size.
 """
 
 from __future__ import annotations
@@ -28,6 +28,9 @@ from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 MAX_LEAVES = 4096
+# A local render holds up to one pending film per level of the tree, plus the leaf being filled:
+# the levels are capped so that these stay under this many bytes (a 4K stratified film is 2.6 GB).
+PENDING_BYTES = 4 << 30
 
 # A node of the tree: ``(start, size)``, leaves start .. start + size - 1.
 Node = tuple[int, int]
@@ -61,12 +64,30 @@ class Layout:
         return offset // self.leaf_spp
 
 
-def layout(spp: int, k: int) -> Layout:
-    """The layout of a render of ``spp`` samples in passes of ``k``: leaves of as few passes as
-    keep it under ``MAX_LEAVES`` leaves (so a local render holds at most log2(MAX_LEAVES)
-    pending films, and a cluster has up to ``MAX_LEAVES`` tasks to share)."""
+def max_leaves(film_bytes: int) -> int:
+    """The most leaves a render whose film takes ``film_bytes`` may have: ``MAX_LEAVES``, or fewer
+    where the pending films (levels + 2 of them) would pass ``PENDING_BYTES``."""
+    levels = max(1, min(MAX_LEAVES.bit_length() - 1, PENDING_BYTES // max(1, film_bytes) - 2))
+    return 1 << levels
+
+
+def layout(spp: int, k: int, film_bytes: int = 0) -> Layout:
+    """The layout of a render of ``spp`` samples in passes of ``k`` into films of ``film_bytes``:
+    leaves of as few passes as keep it under ``max_leaves`` (a local render then holds at most
+    log2 of that many pending films, and a cluster has up to that many tasks to share). It
+    depends only on the render's settings, never on how the render is cut up."""
     passes = -(-spp // k)
-    return Layout(spp, k, max(1, -(-passes // MAX_LEAVES)))
+    return Layout(spp, k, max(1, -(-passes // max_leaves(film_bytes))))
+
+
+def check_node(leaves: int, node: Node) -> None:
+    """Raise ``ValueError`` unless ``node`` is a node of the tree of ``leaves`` leaves: an
+    aligned power-of-two block inside one piece."""
+    start, size = node
+    inside = any(first <= start and start + size <= first + span for first, span in pieces(leaves))
+    if size < 1 or size & (size - 1) or start % size or not inside:
+        raise ValueError(f"{node} is not a node of the merge tree of {leaves} leaves (an aligned "
+                         "power-of-two block of leaves inside one piece)")
 
 
 def pieces(leaves: int) -> list[Node]:
@@ -91,6 +112,19 @@ def task_nodes(leaves: int, task_leaves: int) -> list[Node]:
     return nodes
 
 
+def merges(leaves: int, task_leaves: int) -> list[tuple[Node, Node, Node]]:
+    """``(parent, left, right)`` for every node of the tree above the tasks of ``task_nodes``,
+    children before parents: the merges a cluster runs to pool the tasks up to the pieces."""
+    out = []
+    for start, size in pieces(leaves):
+        step = min(size, task_leaves)
+        while step < size:
+            out.extend(((first, 2 * step), (first, step), (first + step, step))
+                       for first in range(start, start + size, 2 * step))
+            step *= 2
+    return out
+
+
 class Pool(Generic[T]):
     """Pools the nodes of one render's tree in its fixed order, whatever order they are added in.
 
@@ -105,18 +139,16 @@ class Pool(Generic[T]):
         self._nodes: dict[Node, T] = {}
 
     def _piece_size(self, start: int) -> int:
-        for first, size in self._pieces:
-            if first <= start < first + size:
-                return size
-        raise ValueError(f"leaf {start} is outside the render's {self.leaves} leaves")
+        return next(size for first, size in self._pieces if first <= start < first + size)
 
     def add(self, node: Node, value: T) -> None:
-        """Add the pooled samples of ``node`` (an aligned power-of-two block inside a piece) and
-        merge up the tree as far as the siblings are there."""
+        """Add the pooled samples of ``node`` (an aligned power-of-two block inside a piece, none
+        of whose leaves was added before) and merge up the tree as far as the siblings are there."""
+        check_node(self.leaves, node)
         start, size = node
+        if any(first < start + size and start < first + span for first, span in self._nodes):
+            raise ValueError(f"node {node} holds leaves already pooled: they would count twice")
         piece = self._piece_size(start)
-        if size > piece or start % size or node in self._nodes:
-            raise ValueError(f"node {node} is not a new node of the tree of {self.leaves} leaves")
         while size < piece:
             left = start & ~(2 * size - 1)
             sibling = (left + size if left == start else left, size)

@@ -248,12 +248,17 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     seconds = 0.0
 
     continues = learner is not None
-    k = pass_samples(settings.spp, cam.width * cam.height, runs.samples_per_lane)
-    tree = merge_tree.layout(settings.spp, k)
+    tree = tree_layout(scene, runs, settings)
+    k = tree.k
     first, stop = tree.samples(part) if part is not None else (0, settings.spp)
-    if part is not None and (runs.learns or first >= stop):
-        learns = f" with {runs.label}, which learns from every earlier sample" if runs.learns else ""
-        raise InputError(f"cannot render part {part} of a render of {tree.leaves} leaves{learns}")
+    if part is not None:
+        if runs.learns:
+            raise InputError(f"cannot render a part of a render with {runs.label}, which learns from "
+                             "every earlier sample")
+        try:
+            merge_tree.check_node(tree.leaves, part)
+        except ValueError as exc:
+            raise InputError(f"cannot render part {part}: {exc}") from None
     leaf = LeafFilm(tree, cam.width, cam.height, replicates, merge_tree.Pool(tree.leaves, pooled_into))
 
     def merge(batch: Batch, result: tuple[np.ndarray, int, np.ndarray | None]) -> None:
@@ -285,7 +290,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         if progress and time.perf_counter() - start > 5.0:
             print(f"tracer: compiled the shading kernels in {time.perf_counter() - start:.1f} s "
                   "(once after an install or an edit; later runs load them from the cache)", file=sys.stderr)
-        bar = _progress_bar(cam.width * cam.height * (stop - first), progress)
+        bar = progress_bar(cam.width * cam.height * (stop - first), progress)
         start = time.perf_counter()
         if estimator.learns and learner is None:
             plan = estimator.plan
@@ -342,6 +347,18 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     if learner is not None:
         film.learned = learner.maps()
     return RenderResult(film, seconds, samples, nonfinite, interrupted, learner)
+
+
+def tree_layout(scene: Scene, strategy: Strategy, settings: RenderSettings) -> merge_tree.Layout:
+    """The merge tree of a render (``tracer.merge_tree``): fixed by the scene's resolution, the
+    strategy's rays per sample, the spp and the sampler's replicates; the same for every way of
+    cutting the render up."""
+    pixels = scene.camera.width * scene.camera.height
+    k = pass_samples(settings.spp, pixels, strategy.samples_per_lane)
+    # What each pending film costs: per pixel a count, mean and M2 (8 + 24 + 24 bytes), and per
+    # replicate a count and mean (8 + 24).
+    film_bytes = pixels * (56 + 32 * samplers.replicates_of(settings.sampler))
+    return merge_tree.layout(settings.spp, k, film_bytes)
 
 
 def pooled_into(a: Film, b: Film) -> Film:
@@ -462,17 +479,20 @@ def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: Iterator[Bat
         return False
     except KeyboardInterrupt:
         with interrupts.deferred():
+            # Newest first: a thread that finds batch i cancelled takes the next one, which must
+            # then be cancelled already, or a pixel could hold a pass without the one before it.
+            cancelled = {id(future) for _, future in reversed(in_flight) if future.cancel()}
             for batch, future in in_flight:
-                if not future.cancel():
+                if id(future) not in cancelled:
                     merge(batch, future.result())
         return True
 
 
-def _progress_bar(total: int, enabled: bool):
-    """A tqdm bar on stderr, or None when disabled or stderr is not a terminal."""
+def progress_bar(total: int, enabled: bool, unit: str = "sample"):
+    """A tqdm bar on stderr counting ``unit``, or None when disabled or stderr is not a terminal."""
     if not enabled or not sys.stderr.isatty():
         return None
     from tqdm import tqdm
 
-    return tqdm(total=total, unit="sample", unit_scale=True, file=sys.stderr, leave=False,
+    return tqdm(total=total, unit=unit, unit_scale=unit == "sample", file=sys.stderr, leave=False,
                 dynamic_ncols=True, smoothing=0.1)

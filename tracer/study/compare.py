@@ -28,6 +28,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import sys
+import threading
 import time
 import uuid
 from collections.abc import Callable
@@ -252,10 +253,13 @@ class Comparison:
         process CPU seconds (all threads)."""
         if self.clock == "cpu":
             self._warm_up(strategy)
-        start = time.process_time()
+        # On one thread the render runs in this one: its own CPU time, not that of the process's
+        # other threads (a Dask worker's event loop and its other tasks).
+        cpu_clock = time.thread_time if self.threads == 1 else time.process_time
+        start = cpu_clock()
         result = render_complete(self.scene, strategy, settings, film=film, estimator=estimator,
                                  progress=progress, learner=continues.learner if continues else None)
-        cpu = time.process_time() - start
+        cpu = cpu_clock() - start
         return result, (cpu if self.clock == "cpu" else result.seconds), cpu
 
     def _measure(self, run: Run) -> Run:
@@ -394,15 +398,18 @@ class Comparison:
 # Each worker keeps the comparison of the last task it ran (its Embree scene, the reference's
 # variance), so that the tasks after the first one of a comparison do not rebuild them.
 _WORKER_COMPARISON: dict[str, Comparison] = {}
+_WORKER_LOCK = threading.Lock()  # a worker runs one task per thread
 
 
 def comparison_call(token: str, scene: Scene, reference: Film, seed: int, clock: str, name: str,
                     args: tuple) -> Any:
     """A task (``Comparison.perform``): method ``name`` of the comparison ``token`` on one thread."""
-    if token not in _WORKER_COMPARISON:
-        _WORKER_COMPARISON.clear()
-        _WORKER_COMPARISON[token] = Comparison(scene, reference, seed, threads=1, clock=clock)
-    return getattr(_WORKER_COMPARISON[token], name)(*args)
+    with _WORKER_LOCK:
+        if token not in _WORKER_COMPARISON:
+            _WORKER_COMPARISON.clear()
+            _WORKER_COMPARISON[token] = Comparison(scene, reference, seed, threads=1, clock=clock)
+        comparison = _WORKER_COMPARISON[token]
+    return getattr(comparison, name)(*args)
 
 
 def _described(strategy: Strategy, sampler: str) -> str:
