@@ -1,16 +1,16 @@
 """The overhead of rendering a reference on Dask against rendering it in one process.
 
     python benchmarks/cluster.py [--scene veach_mis] [--size 256] [--spp 1024] [--workers 2]
-                                 [--task-spp 32,64,128,256,512] [--rounds 2]
+                                 [--task-spp 32,128,512] [--rounds 3]
 
 Times ``render_loop.render`` on ``--workers`` threads and ``cluster.render_distributed`` on a
 local cluster of as many single-threaded worker processes, for each task size (and the default
-one), interleaved round by round so that a drift of this shared machine's speed hits both
-sides alike. The cluster is started, and every worker has loaded the compiled kernels and built
-the scene, before the clock starts: the times compare rendering, not start-up, which is
-reported apart (it is paid once per command). Checks that every distributed image is the
-local one bit for bit. Prints a table of medians and ratios (Dask / local). Timing lives here,
-never in the tests.
+one), interleaved round by round (each round starting one run further along) so that a drift
+of this shared machine's speed hits all sides alike. The cluster is started, and every worker
+has loaded the compiled kernels and built the scene, before the clock starts: the times
+compare rendering, not start-up, which is reported apart (it is paid once per command).
+Checks that every distributed image is the local one bit for bit. Prints a table of medians
+and ratios (Dask / local). Timing lives here, never in the tests.
 """
 
 from __future__ import annotations
@@ -34,8 +34,8 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--spp", type=int, default=1024)
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--task-spp", default="32,64,128,256,512")
-    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--task-spp", default="32,128,512")
+    parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()
     path = scene_mod.default_scene_path().with_name(f"{args.scene}.toml")
     scene = scene_mod.load_scene(path, args.size, args.size)
@@ -53,18 +53,24 @@ def main() -> None:
         render(scene, strategy, RenderSettings(spp=1, threads=args.workers))
         local_times, dask_times = [], {size: [] for size in sizes}
         expected = None
-        for _ in range(args.rounds):
-            t = time.perf_counter()
-            film = render(scene, strategy, settings).film
-            local_times.append(time.perf_counter() - t)
-            expected = film if expected is None else expected
-            for size in sizes:
+        got = []
+        runs: list[int | str | None] = ["local", *sizes]
+        for round_index in range(args.rounds):
+            # Each round starts one further along the list: no run is always first or last.
+            shift = round_index % len(runs)
+            for size in runs[shift:] + runs[:shift]:
                 t = time.perf_counter()
-                got = cluster.render_distributed(client, scene, strategy, settings, task_spp=size).film
+                if size == "local":
+                    film = render(scene, strategy, settings).film
+                    local_times.append(time.perf_counter() - t)
+                    expected = film if expected is None else expected
+                    continue
+                film = cluster.render_distributed(client, scene, strategy, settings, task_spp=size).film
                 dask_times[size].append(time.perf_counter() - t)
-                same = np.array_equal(got.mean, expected.mean) and np.array_equal(got.m2, expected.m2)
-                if not same:
-                    sys.exit(f"task size {size}: the Dask image differs from the local one")
+                got.append((size, film))
+        for size, film in got:
+            if not (np.array_equal(film.mean, expected.mean) and np.array_equal(film.m2, expected.m2)):
+                sys.exit(f"task size {size}: the Dask image differs from the local one")
     local = statistics.median(local_times)
     print(f"{args.scene} {args.size}x{args.size}, {args.spp} spp, mis; {args.workers} threads locally, "
           f"{args.workers} single-threaded Dask workers; medians of {args.rounds} interleaved rounds")
