@@ -387,7 +387,8 @@ def _add_render_options(p: argparse.ArgumentParser) -> None:
 
 def _add_cluster_options(p: argparse.ArgumentParser, tasks: str, task_spp: bool = False) -> None:
     """--workers and --scheduler (exclusive), and for a reference --task-spp: run on Dask."""
-    g = p.add_argument_group("on a Dask cluster (pip install 'tracer[cluster]')", tasks)
+    g = p.add_argument_group("on a Dask cluster (the cluster extra: pip install '.[cluster]' in tracer's "
+                             "folder)", tasks)
     where = g.add_mutually_exclusive_group()
     where.add_argument("--workers", type=_workers, metavar="N",
                        help="start a local Dask cluster of N single-threaded worker processes")
