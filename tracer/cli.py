@@ -674,9 +674,10 @@ def cmd_reference(args: argparse.Namespace) -> int:
     on_cluster = args.workers is not None or args.scheduler is not None
     if args.task_spp is not None and not on_cluster:
         raise InputError("--task-spp sizes the tasks of --workers or --scheduler", "command line")
-    if on_cluster and strategy.learns:
-        raise InputError(f"{strategy.label} learns between passes from every earlier sample, so its passes "
-                         "are not independent tasks: leave out --workers and --scheduler", "command line")
+    if on_cluster:  # before a local cluster takes seconds to start
+        from .cluster import refuse_learning
+
+        refuse_learning(strategy, "command line")
     # The files are written before a local cluster shuts down: its shutdown takes seconds, and a
     # second Ctrl-C then must not cost the finished work.
     with _cluster(args) as client:
@@ -824,7 +825,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         print(f"{scene.name}: {mode['description']} at {reference.width}x{reference.height}", file=sys.stderr)
     try:
         with _cluster(args) as client:
-            calls = [run(strategy, sampler) for strategy in strategies for sampler in sampler_names]
+            items = [(strategy, sampler) for strategy in strategies for sampler in sampler_names]
+            calls = [run(strategy, sampler) for strategy, sampler in items]
             if args.sweep:
                 first_sampling = _strategy_from(args, "mis", samplings[0]).light_sampling
                 calls += [run(Strategy("mis", classic[0], n_light, n_bsdf,
@@ -832,9 +834,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                                        light_sampling=first_sampling), sampler_names[0])
                           for n_light, n_bsdf in ALLOCATIONS]
             results = comparison.perform(calls, client)
-            count = len(strategies) * len(sampler_names)
-            runs, allocation = results[:count], results[count:]
-            items = [(strategy, sampler) for strategy in strategies for sampler in sampler_names]
+            runs, allocation = results[:len(items)], results[len(items):]
             sweep = comparison.sweeps(items, seeds, max_spp=args.spp, budget=args.time,
                                       client=client) if args.sweep else []
     except KeyboardInterrupt:

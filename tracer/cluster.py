@@ -109,7 +109,9 @@ def connect(workers: int | None = None, scheduler: str | None = None) -> Iterato
         # Dask's workers sample their threads' stacks every 10 ms for the dashboard's profile:
         # measured, renders took 10-15% longer with it (benchmarks/cluster.py). The dashboard on
         # a free port: a second local cluster would warn that 8787 is taken.
-        with dask_config().set({"distributed.worker.profile.enabled": False}):
+        import dask.config  # installed with distributed
+
+        with dask.config.set({"distributed.worker.profile.enabled": False}):
             cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                                dashboard_address=":0", silence_logs=logging.ERROR)
     finally:
@@ -117,13 +119,6 @@ def connect(workers: int | None = None, scheduler: str | None = None) -> Iterato
             signal.signal(signal.SIGINT, previous)
     with cluster, distributed.Client(cluster) as client:
         yield client
-
-
-def dask_config():
-    """``dask.config`` (installed with distributed)."""
-    import dask.config
-
-    return dask.config
 
 
 def _main_thread() -> bool:
@@ -187,6 +182,14 @@ def _estimator(scene: Scene, strategy: Strategy) -> DirectLighting:
         return _ESTIMATORS[key]
 
 
+def refuse_learning(strategy: Strategy, where: str | None = None) -> None:
+    """``InputError`` for a strategy that learns between passes: its sample ranges depend on all
+    the samples before them, so they are not independent tasks."""
+    if strategy.learns:
+        raise InputError(f"{strategy.label} learns between passes from every earlier sample, so its passes "
+                         "are not independent tasks: render it without --workers or --scheduler", where)
+
+
 # What a task of a distributed render gives back: its film, the count of samples that were not
 # finite, and the samples rendered.
 Part = tuple[Film, int, int]
@@ -230,9 +233,7 @@ def render_distributed(client, scene: Scene, strategy: Strategy, settings: Rende
     finished, and its record lists their sample ranges. Strategies that learn between passes
     (optimal MIS, adaptive allocation) are refused: each pass depends on all the samples before it.
     """
-    if strategy.learns:
-        raise InputError(f"{strategy.label} learns between passes from every earlier sample, so its "
-                         "passes are not independent tasks: render it without --workers or --scheduler")
+    refuse_learning(strategy)
     fresh = film is None
     film, earlier = film_to_fill(scene, strategy, settings, film)
     cam = scene.camera

@@ -169,7 +169,7 @@ class DirectLighting:
     @property
     def learns(self) -> bool:
         """Whether the render loop must learn between passes (``tracer.tuning``)."""
-        return self.plan.optimal or self.plan.adaptive
+        return self.strategy.learns
 
     def radiance(self, origins: np.ndarray, dirs: np.ndarray, seed: int = 0, pixel: np.ndarray | None = None,
                  sample: np.ndarray | None = None, sampler: str = "independent") -> np.ndarray:

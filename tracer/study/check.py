@@ -772,8 +772,9 @@ def _measure_all(entries, base: Path, seed_offset: int, threads: int, stream, re
             result.measurements[setup.entry.name] = measured(setup, results[done:done + len(jobs)])
             done += len(jobs)
     for e in entries:
-        m = result.measurements[e.name] if client is not None else measure(e, base, seed_offset, threads)
-        result.measurements[e.name] = m
+        if client is None:
+            result.measurements[e.name] = measure(e, base, seed_offset, threads)
+        m = result.measurements[e.name]
         if stream is not None:
             print(
                 f"  measured {e.name}: {len(e.seeds)} seeds x {e.spp} spp at "
