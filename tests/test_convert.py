@@ -187,3 +187,67 @@ def test_file_normals_that_normalize_differently_still_come_back(tmp_path):
     (tmp_path / "out").mkdir()
     _, back, _ = round_trip(tmp_path / "n.toml", tmp_path / "out")
     assert back.digest == scene.digest
+
+
+def _two_mesh_scene(folder: Path, mesh_names: tuple[str, str]) -> Path:
+    """A scene in ``folder`` with a quad and two mesh shapes read from ``mesh_names`` (shapes 1
+    and 2), each a different single triangle."""
+    for n, name in enumerate(mesh_names):
+        (folder / name).write_text(
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+            "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+            f"0 0 {n}\n1 0 {n}\n0 1 {n}\n3 0 1 2\n")
+    path = folder / "orig.toml"
+    path.write_text('[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 40\n'
+                    '[[shapes]]\ntype = "quad"\norigin = [0, 0, 0]\nedge1 = [1, 0, 0]\nedge2 = [0, 1, 0]\n'
+                    f'[[shapes]]\ntype = "mesh"\nfile = "{mesh_names[0]}"\n'
+                    f'[[shapes]]\ntype = "mesh"\nfile = "{mesh_names[1]}"\nemission = [1, 1, 1]\n')
+    return path
+
+
+def test_convert_never_overwrites_a_mesh_the_scene_reads(tmp_path):
+    """Issue 38.1: the source scene's shape 2 is read from ``out_shape2.ply``, the very name
+    ``convert -o out.toml`` gives shape 2's PLY; the converter picks another name for it and
+    leaves the input as it was (the source scene keeps its digest, the output reads back the
+    same)."""
+    source = _two_mesh_scene(tmp_path, ("out_shape1.ply", "out_shape2.ply"))
+    before = {p.name: p.read_bytes() for p in tmp_path.glob("*.ply")}
+    digest = load_scene(source).digest
+    assert cli.main(["convert", str(source), "-o", str(tmp_path / "out.toml"), "--quiet"]) == 0
+    assert {name: (tmp_path / name).read_bytes() for name in before} == before
+    assert load_scene(source).digest == digest
+    assert load_scene(tmp_path / "out.toml").digest == digest
+    text = (tmp_path / "out.toml").read_text()
+    assert 'file = "out_shape1_2.ply"' in text and 'file = "out_shape2_2.ply"' in text
+    # Converting again replaces the PLY files tracer wrote the first time, and only those.
+    assert cli.main(["convert", str(source), "-o", str(tmp_path / "out.toml"), "--quiet"]) == 0
+    assert sorted(p.name for p in tmp_path.glob("*.ply")) == [
+        "out_shape1.ply", "out_shape1_2.ply", "out_shape2.ply", "out_shape2_2.ply"]
+    assert {name: (tmp_path / name).read_bytes() for name in before} == before
+
+
+def test_convert_never_overwrites_a_file_tracer_did_not_write(tmp_path):
+    """A file of the output's mesh name that tracer did not write (a user's own PLY, or anything
+    else) is not replaced either, even when the scene does not read it."""
+    source = _two_mesh_scene(tmp_path, ("a.ply", "b.ply"))
+    own = tmp_path / "out_shape1.ply"
+    own.write_bytes(b"not tracer's\n")
+    assert cli.main(["convert", str(source), "-o", str(tmp_path / "out.toml"), "--quiet"]) == 0
+    assert own.read_bytes() == b"not tracer's\n"
+    assert load_scene(tmp_path / "out.toml").digest == load_scene(source).digest
+
+
+def test_convert_writes_many_shapes_with_one_pass_over_the_folder(tmp_path, monkeypatch):
+    """Issue 38 (smaller): the files of a conversion are synced and renamed together, the folder
+    listed once for stale temporaries (per file, 5,000 shapes took 150 s, mostly listing the
+    growing folder 5,000 times)."""
+    import os
+
+    from tracer import atomic
+
+    listings = []
+    real = os.listdir
+    monkeypatch.setattr(atomic.os, "listdir", lambda folder: listings.append(folder) or real(folder))
+    source = _two_mesh_scene(tmp_path, ("a.ply", "b.ply"))
+    write_scene(load_scene(source), tmp_path / "out.toml")
+    assert listings == [tmp_path]

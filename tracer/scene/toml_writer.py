@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__, materials
-from ..atomic import atomic_write, write_text
+from ..atomic import atomic_write_many, bytes_writer, text_writer
 from ..errors import InputError
 from .icosphere import unit_icosphere
 from .model import Scene, Shape
@@ -32,24 +32,65 @@ _BARE_KEY = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz01234
 
 
 def write_scene(scene: Scene, path: str | os.PathLike[str], source: str | None = None) -> list[Path]:
-    """Write ``scene`` as the TOML file ``path`` and its meshes as ``STEM_shapeN.ply`` beside it
-    (each file atomically, the TOML last). Returns the files written. ``source`` is named in the
-    TOML's first comment. Raises InputError if the scene cannot be written as TOML."""
+    """Write ``scene`` as the TOML file ``path`` and its meshes as PLY files beside it, all
+    atomically and together (``atomic.atomic_write_many``: the TOML renamed last). Returns the
+    files written. ``source`` is named in the TOML's first comment.
+
+    A mesh file is ``STEM_shapeN.ply``, or, where that name is taken by a file this must not
+    replace, ``STEM_shapeN_2.ply``, ``_3``, ...: a file replaced must be a PLY that tracer wrote
+    (an earlier conversion's) and must not be one the scene itself reads (``_inputs``), so that
+    converting never overwrites an input or a user's own file. Raises InputError if the scene
+    cannot be written as TOML."""
     target = Path(path)
-    text, meshes = scene_to_toml(scene, lambda i: f"{target.stem}_shape{i}.ply", source)
-    written = []
-    for name, data in meshes:
-        mesh_path = target.parent / name
+    inputs = _inputs(scene)
+    taken: set[Path] = set()
 
-        def write(tmp: str, data: bytes = data) -> None:
-            with open(tmp, "wb") as fh:
-                fh.write(data)
+    def mesh_name(i: int) -> str:
+        base, number = f"{target.stem}_shape{i}", 1
+        while True:
+            name = f"{base}.ply" if number == 1 else f"{base}_{number}.ply"
+            candidate = target.parent / name
+            if candidate not in taken and _replaceable(candidate, inputs):
+                taken.add(candidate)
+                return name
+            number += 1
 
-        atomic_write(mesh_path, write)
-        written.append(mesh_path)
-    write_text(target, text)
-    written.append(target)
-    return written
+    text, meshes = scene_to_toml(scene, mesh_name, source)
+    files = [(target.parent / name, bytes_writer(data)) for name, data in meshes]
+    files.append((target, text_writer(text)))
+    atomic_write_many(files)
+    return [file for file, _ in files]
+
+
+def _inputs(scene: Scene) -> set[Path]:
+    """The files the scene was read from, resolved: the scene file and its shapes' mesh files."""
+    files = [scene.path] + [s.record["file"] for s in scene.shapes if isinstance(s.record.get("file"), str)]
+    resolved = set()
+    for file in files:
+        try:
+            resolved.add(Path(file).resolve())
+        except (OSError, RuntimeError):
+            continue
+    return resolved
+
+
+# The comment every PLY that tracer writes carries in its header (``_ply``).
+WRITTEN_BY_TRACER = b"comment written by tracer"
+
+
+def _replaceable(candidate: Path, inputs: set[Path]) -> bool:
+    """Whether a mesh may be written at ``candidate``: nothing is there, or a PLY that tracer
+    wrote and that the scene does not read."""
+    try:
+        if not candidate.exists() and not candidate.is_symlink():
+            return True
+        if candidate.resolve() in inputs or not candidate.is_file() or candidate.is_symlink():
+            return False
+        with open(candidate, "rb") as fh:
+            head = fh.read(256)
+    except OSError:
+        return False
+    return head.startswith(b"ply\n") and WRITTEN_BY_TRACER + b"\n" in head
 
 
 def scene_to_toml(scene: Scene, mesh_name, source: str | None = None) -> tuple[str, list[tuple[str, bytes]]]:
@@ -188,7 +229,7 @@ def _ply(scene: Scene, index: int, shape: Shape, start: int, end: int) -> tuple[
         if not np.array_equal(normals[faces], corners) or np.any(used & ~np.any(normals, axis=1)):
             raise InputError(f"shape {index} has corners of one vertex with different normals, or a vertex "
                              "without one: its shading cannot be written as a PLY file", scene.path)
-    header = ["ply", "format binary_little_endian 1.0", "comment written by tracer",
+    header = ["ply", "format binary_little_endian 1.0", WRITTEN_BY_TRACER.decode("ascii"),
               f"element vertex {len(vertices)}", "property float x", "property float y", "property float z"]
     fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
     if normals is not None:
