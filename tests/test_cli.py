@@ -15,7 +15,8 @@ import pytest
 
 from tracer.cli import main
 from tracer.film import Film
-from tracer.imagefiles import CHANNELS, read_exr
+from tracer.imagefiles import CHANNELS, read_exr, write_exr
+from tracer.record import RenderRecord
 from tracer.render_loop import SAMPLES_PER_PASS, RenderSettings, plan_batches, render
 from tracer.scene import load_scene
 from tracer.strategy import Strategy
@@ -660,3 +661,46 @@ def test_sampler_from_the_command_line_and_the_scene(tmp_path, monkeypatch, caps
     assert main(["render", str(bad), "--spp", "1", "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.toml" in err[0] and "sampler" in err[0] and "halton" in err[0]
+
+
+def _rewrite_header(path: Path, changes: dict) -> None:
+    """Rewrite the EXR at ``path`` with its pixels as they are and ``changes`` made to its
+    header: what a damaged or edited file holds, which tracer's writer never writes."""
+    inp = oiio.ImageInput.open(str(path))
+    spec = inp.spec()
+    pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
+    inp.close()
+    spec.set_format(oiio.FLOAT)
+    for key, value in changes.items():
+        spec.attribute(key, value)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec) and out.write_image(pixels)
+    out.close()
+
+
+@pytest.mark.parametrize("changes, words", [
+    ({"tracer:light_samples": 2147483647}, "tracer:light_samples = 2147483647 is not a valid light_samples"),
+    ({"tracer:spp": 0}, "holds no samples but a mean or variance that is not 0"),
+], ids=["light samples past the bound", "spp 0 over 8 real samples"])
+def test_a_resume_trusts_no_header_field_it_cannot_check(tmp_path, capsys, changes, words):
+    """Issue 38.4: `reference --resume` of a file whose header says 2^31 - 1 light samples
+    allocated 24 GiB and died in a numpy traceback; one whose header says 0 spp over pixels
+    that hold 8 samples kept only the new samples, silently. Both are refused before any
+    rendering, with one line naming the file, and the file is left as it was."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(GOOD)
+    out = tmp_path / "ref.exr"
+    film = Film(4, 3)
+    film.add_block(0, np.random.default_rng(5).uniform(0.0, 1.0, size=(12, 8, 3)))
+    film.record = RenderRecord(strategy="mis", heuristic="power", light_samples=1, bsdf_samples=1,
+                               one_sample=False, light_selection="power", light_sampling="area",
+                               allocation="fixed", sampler="independent", samples=((0, 0, 8),),
+                               seconds=1.0, scene=str(scene), scene_digest=load_scene(scene).digest)
+    write_exr(out, film)
+    _rewrite_header(out, changes)
+    before = out.read_bytes()
+    capsys.readouterr()
+    assert main(["reference", str(scene), "-o", str(out), "--spp", "4", "--resume", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert words in err and str(out) in err and len(err.strip().splitlines()) == 1, err
+    assert out.read_bytes() == before

@@ -143,6 +143,26 @@ DAMAGED = {
                                   "tracer:scene_digest = 'abc'"),
     "huge samples channel": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4}, np.array([4.0, 1e30, 4.0, 4.0]),
                              "channel 'samples' is not a sample count"),
+    # Issue 38.2: a float32 channel counts exactly only up to 2^24 (16777217 is not a float32).
+    "samples channel past float32's exact counts": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4},
+                                                    np.array([4.0, 16777218.0, 4.0, 4.0]),
+                                                    "channel 'samples' is not a sample count"),
+    # Issue 38.4: a header held to the bounds of the command line, and cross-checked.
+    "light samples past the command line's bound": (GOOD_MEAN, GOOD_VAR,
+                                                    {"tracer:spp": 4, "tracer:light_samples": 2147483647},
+                                                    None, "tracer:light_samples = 2147483647"),
+    "bsdf samples past the bound": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4, "tracer:bsdf_samples": "1000001"},
+                                    None, "tracer:bsdf_samples"),
+    "seconds not finite": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4, "tracer:seconds": float("nan")}, None,
+                           "tracer:seconds"),
+    "one_sample not a flag": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 4, "tracer:one_sample": 7}, None,
+                              "tracer:one_sample"),
+    "spp 0 over pixels with samples": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 0, "tracer:samples": "0:0-7"}, None,
+                                       "pixel (0, 0) and 3 more holds no samples but a mean"),
+    "one sample with a variance": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 1}, None,
+                                   "holds one sample but a variance"),
+    "spp not the smallest count": (GOOD_MEAN, GOOD_VAR, {"tracer:spp": 2}, np.array([4.0, 5.0, 4.0, 4.0]),
+                                   "tracer:spp = 2 is not the smallest count of the sample channels, 4"),
 }
 
 
@@ -212,3 +232,49 @@ def test_values_past_float32_are_refused_not_written_as_inf(tmp_path):
     with pytest.raises(InputError, match=r"channel 'variance.R' at pixel \(1, 0\) exceeds"):
         write_exr(tmp_path / "r.exr", film)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_counts_past_float32_are_stored_exactly(tmp_path):
+    """Issue 38.2: a pool of a 2^24-spp film and one whose pixels hold 7 or 8 samples has counts
+    2^24 + 7 and 2^24 + 8, which a float32 channel rounds to the same number (the merge wrote
+    16777224 in every pixel and tracer:spp 16777223). They are written as two exact channels and
+    read back exactly, as is every count below 2^48."""
+    counts = np.array([2**24 + 7, 2**24 + 8, 2**47 + 3, 5])
+    film = Film(4, 1, counts, np.ones((4, 3)), np.ones((4, 3)))
+    write_exr(tmp_path / "big.exr", film)
+    back = read_exr(tmp_path / "big.exr")
+    assert back.count.tolist() == counts.tolist() and back.spp == 5
+    inp = oiio.ImageInput.open(str(tmp_path / "big.exr"))
+    assert {"samples.low", "samples.high"} <= set(inp.spec().channelnames)
+    inp.close()
+
+
+def test_unequal_counts_past_what_the_file_holds_are_refused_before_writing(tmp_path):
+    """Past 2^48 unequal counts are not written (nothing appears), with one line that says so."""
+    film = Film(2, 1, np.array([2**48, 3]), np.ones((2, 3)), np.ones((2, 3)))
+    with pytest.raises(InputError, match="unequal counts are stored exactly up to"):
+        write_exr(tmp_path / "r.exr", film)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_pool_past_2_to_the_53_is_refused_before_writing(tmp_path):
+    """Issue 38.3: merging two files of 2^53 - 1 spp (other seeds) made a file whose tracer:spp,
+    2^54 - 2, tracer then refused to read. The writer now checks everything the reader checks
+    before writing: the pool is refused with one line and no file appears."""
+    from tracer.film import merge_renders
+
+    def film(seed):
+        f = Film(1, 1, np.array([2**53 - 1]), np.ones((1, 3)), np.ones((1, 3)))
+        f.record = RenderRecord(strategy="mis", heuristic="power", light_samples=1, bsdf_samples=1,
+                                one_sample=False, light_selection="power", light_sampling="area",
+                                sampler="independent", samples=((seed, 0, 2**53 - 1),),
+                                scene="x.toml", scene_digest="0f" * 32)
+        return f
+
+    for path in ("a.exr", "b.exr"):
+        write_exr(tmp_path / path, film(len(path) + ord(path[0])))
+        assert read_exr(tmp_path / path).spp == 2**53 - 1
+    pooled = merge_renders(read_exr(tmp_path / "a.exr"), read_exr(tmp_path / "b.exr"))
+    with pytest.raises(InputError, match="more than the 9007199254740992"):
+        write_exr(tmp_path / "pool.exr", pooled)
+    assert not (tmp_path / "pool.exr").exists()

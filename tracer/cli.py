@@ -15,6 +15,7 @@ from pathlib import Path
 from . import __version__, interrupts, notices
 from .errors import InputError
 from .sampler_choice import DEFAULT_SAMPLER, SAMPLERS
+from .strategy import MAX_SAMPLES_PER_CAMERA_SAMPLE
 
 EXIT_CHECK_FAILED = 1
 EXIT_BAD_INPUT = 2
@@ -44,8 +45,8 @@ _spp = _int_in(1, MAX_SPP)
 _seed = _int_in(0, 2**64 - 1)
 _threads = _int_in(1, 1024)
 _workers = _int_in(1, 1024)
-_samples_per_camera_sample = _int_in(0, 1_000_000)
-_ris_candidates = _int_in(1, 1_000_000)
+_samples_per_camera_sample = _int_in(0, MAX_SAMPLES_PER_CAMERA_SAMPLE)
+_ris_candidates = _int_in(1, MAX_SAMPLES_PER_CAMERA_SAMPLE)
 
 
 def _counts(text: str) -> list[int]:

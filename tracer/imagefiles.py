@@ -5,8 +5,16 @@ The EXR (``docs/DESIGN.md``, "The render file"): channels ``R,G,B`` = pixel mean
 pixel value is that / spp), float32 (or half means for references), zip compression; the
 header holds ``tracer:spp`` and the render record (``tracer.record``). If the counts differ
 between pixels (a render interrupted mid-pass), a seventh channel ``samples`` holds each
-pixel's count and ``tracer:spp`` is the smallest count. Channels are looked up by name on read
-(EXR reorders them).
+pixel's count and ``tracer:spp`` is the smallest count. A 32-bit float counts exactly up to
+2^24, so where a count exceeds that the count is two channels instead, ``samples.low`` (count
+mod 2^24) and ``samples.high`` (count // 2^24), each exact: counts up to 2^48 a pixel (a
+film past that with unequal counts is refused, nothing written). Channels are looked up by name
+on read (EXR reorders them).
+
+Reads check the header against itself and the pixels before anything trusts it: the header's
+fields against their bounds (``tracer.record``), ``tracer:spp`` against the smallest count, and
+pixels that hold no samples against their mean and variance (all 0), and fewer than two against
+their variance (0); what a writer would never write is refused, with the pixel named.
 
 Films of a sampler with replicates (``stratified``, ``sobol``) write their variance channels as
 the effective per-sample variance (``tracer.film``: count x the variance of the pixel mean
@@ -39,6 +47,10 @@ from .sampler_choice import MAX_REPLICATE_COUNT, max_samples, replicates_of
 
 CHANNELS = ("R", "G", "B", "variance.R", "variance.G", "variance.B")
 COUNT_CHANNEL = "samples"
+# Counts above FLOAT_EXACT (where float32 stops counting exactly) are written as two channels.
+COUNT_LOW, COUNT_HIGH = "samples.low", "samples.high"
+FLOAT_EXACT = 2**24
+MAX_SPLIT_COUNT = FLOAT_EXACT * FLOAT_EXACT  # what the two channels hold (exclusive)
 SPP_ATTRIBUTE = "tracer:spp"
 REPLICATE_LAYER = "replicate{}"
 FLOAT32_MAX = 3.4028234e38
@@ -57,15 +69,18 @@ def write_exr(path: str | os.PathLike[str], film: Film, half: bool = False) -> N
     import OpenImageIO as oiio
 
     half = half and bool(np.all(np.abs(film.mean) <= HALF_MAX))
-    names = list(CHANNELS) + ([] if film.uniform else [COUNT_CHANNEL])
+    check_writable(film, str(path))
+    names = list(CHANNELS)
     planes = [film.mean, film.variance()]
     if not film.uniform:
-        planes.append(film.count[:, None].astype(np.float64))
+        if int(film.count.max()) <= FLOAT_EXACT:
+            names.append(COUNT_CHANNEL)
+            planes.append(film.count[:, None].astype(np.float64))
+        else:
+            names += [COUNT_LOW, COUNT_HIGH]
+            planes += [(film.count % FLOAT_EXACT)[:, None].astype(np.float64),
+                       (film.count // FLOAT_EXACT)[:, None].astype(np.float64)]
     if film.replicates:
-        if film.rep_count.size and int(film.rep_count.max()) > MAX_REPLICATE_COUNT:
-            raise InputError(f"a replicate holds {int(film.rep_count.max())} samples, more than the "
-                             f"{MAX_REPLICATE_COUNT} a 32-bit float counts exactly; nothing was written",
-                             str(path))
         for r in range(film.replicates):
             names += [f"{REPLICATE_LAYER.format(r)}.{c}" for c in ("R", "G", "B", COUNT_CHANNEL)]
             planes += [film.rep_mean[:, r, :], film.rep_count[:, r, None].astype(np.float64)]
@@ -96,6 +111,27 @@ def write_exr(path: str | os.PathLike[str], film: Film, half: bool = False) -> N
     atomic_write(path, lambda tmp: _write(tmp, spec, pixels))
 
 
+def check_writable(film: Film, where: str) -> None:
+    """Raise InputError (nothing written) unless :func:`read_exr` would read back the file of
+    ``film``: counts that the count channels hold exactly, a header that passes the reader's
+    checks. A merge or a resume checks this before it writes, so that tracer never writes a
+    file it then refuses."""
+    most = int(film.count.max()) if len(film.count) else 0
+    if most > MAX_COUNT:
+        raise InputError(f"a pixel would hold {most} samples, more than the {MAX_COUNT} (2^53) a render "
+                         "file counts exactly; nothing was written", where)
+    if not film.uniform and most >= MAX_SPLIT_COUNT:
+        raise InputError(f"a pixel would hold {most} samples while others hold fewer: unequal counts are "
+                         f"stored exactly up to {MAX_SPLIT_COUNT - 1} (2^48 - 1); nothing was written", where)
+    if film.replicates and film.rep_count.size and int(film.rep_count.max()) > MAX_REPLICATE_COUNT:
+        raise InputError(f"a replicate holds {int(film.rep_count.max())} samples, more than the "
+                         f"{MAX_REPLICATE_COUNT} a 32-bit float counts exactly; nothing was written", where)
+    try:
+        RenderRecord.from_attributes(film.record.attributes(), most)
+    except InputError as exc:
+        raise InputError(f"the render's record would not read back ({exc}); nothing was written", where) from None
+
+
 def read_exr(path: str | os.PathLike[str]) -> Film:
     """Read a render EXR (written by :func:`write_exr`, or any EXR with its six channels) into a
     film whose record is the header's."""
@@ -122,15 +158,12 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
     data = np.asarray(data, dtype=np.float64).reshape(spec.height * spec.width, spec.nchannels)
     attributes = {a.name: a.value for a in spec.extra_attribs if a.name.startswith("tracer:")}
     spp = _sample_count(attributes.get(SPP_ATTRIBUTE, 0), path)
-    if COUNT_CHANNEL in names:
-        counts = data[:, names.index(COUNT_CHANNEL)]
-        bad = ~(np.isfinite(counts) & (counts >= 0) & (counts <= MAX_COUNT) & (counts == np.rint(counts)))
-        if bad.any():
-            raise InputError(f"channel '{COUNT_CHANNEL}' is not a sample count at {_pixel(bad, spec.width)}: "
-                             f"{counts[np.argmax(bad)]}", path)
-        count = counts.astype(np.int64)
-    else:
+    count = _read_counts(names, data, spec.width, path)
+    if count is None:
         count = np.full(spec.height * spec.width, spp, dtype=np.int64)
+    elif SPP_ATTRIBUTE in attributes and len(count) and int(count.min()) != spp:
+        raise InputError(f"header attribute {SPP_ATTRIBUTE} = {spp} is not the smallest count of the sample "
+                         f"channels, {int(count.min())}", path)
     mean = np.ascontiguousarray(data[:, [names.index(c) for c in CHANNELS[:3]]])
     var = np.ascontiguousarray(data[:, [names.index(c) for c in CHANNELS[3:]]])
     for label, values, ok in (("mean (R, G, B)", mean, np.isfinite(mean)),
@@ -139,6 +172,17 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
         if bad.any():
             raise InputError(f"{label} is not a finite{' non-negative' if label == 'variance' else ''} "
                              f"number at {_pixel(bad, spec.width)}: {values[np.argmax(bad)].tolist()}", path)
+    if SPP_ATTRIBUTE in attributes:
+        # A tracer file: a pixel without samples has a zero mean and variance, one with a single
+        # sample a zero variance. (A header edited to say fewer samples than the pixels hold
+        # fails here, instead of a resume silently dropping them.)
+        for label, bad in (("holds no samples but a mean or variance that is not 0",
+                            (count == 0) & np.any((mean != 0.0) | (var != 0.0), axis=1)),
+                           ("holds one sample but a variance that is not 0",
+                            (count == 1) & np.any(var != 0.0, axis=1))):
+            if bad.any():
+                raise InputError(f"{_pixel(bad, spec.width)} {label} (by {SPP_ATTRIBUTE} = {spp} and the "
+                                 "sample channels): the header does not describe these pixels", path)
     try:
         # A file that names no sample range holds samples 0 .. (its largest count) - 1.
         record = RenderRecord.from_attributes(attributes, int(count.max()) if len(count) else 0)
@@ -157,6 +201,32 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
     film = Film(spec.width, spec.height, count, mean, m2, record)
     _read_replicates(film, names, data, path, _means_are_half(spec))
     return film
+
+
+def _read_counts(names: list[str], data: np.ndarray, width: int, path: str) -> np.ndarray | None:
+    """(P,) int64 per-pixel counts from the ``samples`` channel, or from ``samples.low`` and
+    ``samples.high``; None if the file has neither (every pixel then holds ``tracer:spp``).
+    Raises InputError where a count is not whole, or not exact in its 32-bit float."""
+    if COUNT_CHANNEL in names:
+        parts = [(COUNT_CHANNEL, data[:, names.index(COUNT_CHANNEL)], FLOAT_EXACT, 1)]
+    elif COUNT_LOW in names or COUNT_HIGH in names:
+        if not (COUNT_LOW in names and COUNT_HIGH in names):
+            raise InputError(f"channels '{COUNT_LOW}' and '{COUNT_HIGH}' come together; one is missing", path)
+        parts = [(COUNT_LOW, data[:, names.index(COUNT_LOW)], FLOAT_EXACT - 1, 1),
+                 (COUNT_HIGH, data[:, names.index(COUNT_HIGH)], FLOAT_EXACT, FLOAT_EXACT)]
+    else:
+        return None
+    count = np.zeros(len(data), dtype=np.int64)
+    for name, values, most, scale in parts:
+        # Above 2^24 a float32 channel no longer counts exactly (files of tracer <= 0.9 wrote such
+        # counts rounded): refused rather than read as a count that may be off.
+        bad = ~(np.isfinite(values) & (values >= 0) & (values <= most) & (values == np.rint(values)))
+        if bad.any():
+            raise InputError(f"channel '{name}' is not a sample count at {_pixel(bad, width)}: "
+                             f"{values[np.argmax(bad)]} (a count is a whole number in 0 .. {most}, exact in "
+                             "a 32-bit float)", path)
+        count += values.astype(np.int64) * scale
+    return count
 
 
 def _read_replicates(film: Film, names: list[str], data: np.ndarray, path: str, half: bool) -> None:

@@ -24,12 +24,14 @@ do not.
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .errors import InputError
+from .errors import InputError, shown
+from .strategy import MAX_SAMPLES_PER_CAMERA_SAMPLE
 
 PREFIX = "tracer:"
 # The fields that define the estimator: renders may be pooled only if all of them agree.
@@ -172,8 +174,8 @@ class RenderRecord:
         without ``tracer:samples`` (older tracer, other tools) holds one range: its
         ``tracer:seed`` from ``tracer:first_sample`` (default 0) to ``tracer:next_sample``
         (default first + ``spp``); without a seed its samples are unknown (None)."""
-        kinds = {"light_samples": _whole, "bsdf_samples": _whole, "seed": _whole, "first_sample": _whole,
-                 "next_sample": _whole, "one_sample": lambda v: bool(_whole(v)), "seconds": float,
+        kinds = {"light_samples": _per_camera_sample, "bsdf_samples": _per_camera_sample, "seed": _whole,
+                 "first_sample": _whole, "next_sample": _whole, "one_sample": _flag, "seconds": _seconds,
                  "samples": parse_ranges, "scene_digest": _digest}
         values: dict[str, Any] = {}
         for name in [f.name for f in dataclasses.fields(cls)] + ["seed", "first_sample", "next_sample"]:
@@ -182,12 +184,12 @@ class RenderRecord:
                 try:
                     values[name] = kinds.get(name, str)(raw)
                 except (TypeError, ValueError, OverflowError) as exc:
-                    raise InputError(f"header attribute {PREFIX + name} = {raw!r} is not a valid "
+                    raise InputError(f"header attribute {PREFIX + name} = {shown(repr(raw))} is not a valid "
                                      f"{name}: {exc}") from None
         for name, allowed in _names().items():
             if name in values and values[name] not in allowed:
-                raise InputError(f"header attribute {PREFIX}{name} = {values[name]!r} is not one of "
-                                 f"{', '.join(allowed)}")
+                raise InputError(f"header attribute {PREFIX}{name} = {shown(repr(values[name]))} is not one "
+                                 f"of {', '.join(allowed)}")
         seed, first, nxt = (values.pop(k, None) for k in ("seed", "first_sample", "next_sample"))
         one = None
         if seed is not None:
@@ -225,6 +227,29 @@ def _whole(value: Any) -> int:
     if isinstance(value, float) or isinstance(value, str) and not re.fullmatch(r"-?\d{1,20}", value.strip()):
         raise ValueError("not a whole number")
     return int(value)
+
+
+def _per_camera_sample(value: Any) -> int:
+    """A light or BSDF sample count from a header, held to the bounds the command line has (a
+    resume renders with it: 2^31 light samples allocated 24 GiB and died)."""
+    count = _whole(value)
+    if not 0 <= count <= MAX_SAMPLES_PER_CAMERA_SAMPLE:
+        raise ValueError(f"not in 0 .. {MAX_SAMPLES_PER_CAMERA_SAMPLE}")
+    return count
+
+
+def _flag(value: Any) -> bool:
+    flag = _whole(value)
+    if flag not in (0, 1):
+        raise ValueError("not 0 or 1")
+    return bool(flag)
+
+
+def _seconds(value: Any) -> float:
+    seconds = float(value)
+    if not (math.isfinite(seconds) and seconds >= 0.0):
+        raise ValueError("not a finite number >= 0")
+    return seconds
 
 
 def _digest(value: Any) -> str:

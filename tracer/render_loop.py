@@ -32,6 +32,7 @@ from . import interrupts, merge_tree, samplers, tuning
 from .errors import InputError
 from .estimators import DirectLighting
 from .film import Film
+from .imagefiles import MAX_SPLIT_COUNT
 from .jit import jit
 from .record import RenderRecord, check_mergeable, merged
 from .sampler_choice import MAX_REPLICATE_COUNT
@@ -202,6 +203,11 @@ def film_to_fill(scene: Scene, strategy: Strategy, settings: RenderSettings,
     if film.replicates != replicates:
         raise InputError(f"cannot add {settings.sampler} samples to a film of {film.replicates} replicates "
                          f"(the {settings.sampler} sampler keeps {replicates})")
+    if not film.uniform and int(film.count.max()) + settings.spp >= MAX_SPLIT_COUNT:
+        # Checked now rather than when the file is written, after all the work.
+        raise InputError(f"{settings.spp} spp more would put {int(film.count.max()) + settings.spp} samples "
+                         f"in a pixel of a film whose pixels hold unequal counts, which its render file "
+                         f"stores exactly only below {MAX_SPLIT_COUNT} (2^48)")
     held = int(film.rep_count.max()) if replicates and film.rep_count.size else 0
     if replicates and held + -(-settings.spp // replicates) > MAX_REPLICATE_COUNT:
         # Checked now rather than when the file is written, after all the work.

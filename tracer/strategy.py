@@ -41,6 +41,10 @@ DEFAULT_RIS_CANDIDATES = 16
 # warped toward the receiver's cosine.
 LIGHT_SAMPLINGS = ("area", "solid-angle", "solid-angle-cos")
 DEFAULT_LIGHT_SAMPLING = "area"
+# The most light or direction samples (ris: candidates) a camera sample may take: a render's
+# buffers grow with the count, and a million already takes one lane per batch. The command line,
+# the API and render files (``tracer.record``) are held to it alike.
+MAX_SAMPLES_PER_CAMERA_SAMPLE = 1_000_000
 # The direction technique of each strategy that takes direction samples.
 DIRECTION_TECHNIQUE = {"uniform": "uniform", "cosine": "cosine", "bsdf": "bsdf", "mis": "bsdf", "ris": "bsdf"}
 
@@ -94,8 +98,9 @@ class Strategy:
                              f"expected one of {', '.join(LIGHT_SAMPLINGS)}")
         for field_name in ("light_samples", "bsdf_samples"):
             count = getattr(self, field_name)
-            if isinstance(count, bool) or not isinstance(count, int) or count < 0:
-                raise ValueError(f"{field_name} must be a whole number >= 0, got {count!r}")
+            if isinstance(count, bool) or not isinstance(count, int) or not 0 <= count <= MAX_SAMPLES_PER_CAMERA_SAMPLE:
+                raise ValueError(f"{field_name} must be a whole number in 0 .. {MAX_SAMPLES_PER_CAMERA_SAMPLE}, "
+                                 f"got {count!r}")
         if self.light_count + self.direction_count == 0:
             raise ValueError(f"strategy {self.name!r} with these counts takes no samples")
         if self.name == "ris" and self.light_samples == 0:
@@ -117,8 +122,10 @@ class Strategy:
         ``light``), or M - M // 2 light and M // 2 BSDF samples (``light+bsdf``, M >= 2)."""
         if sources not in RIS_SOURCES:
             raise ValueError(f"unknown ris sources {sources!r}; expected one of {', '.join(RIS_SOURCES)}")
-        if isinstance(candidates, bool) or not isinstance(candidates, int) or candidates < 1:
-            raise ValueError(f"ris candidates must be a whole number >= 1, got {candidates!r}")
+        if (isinstance(candidates, bool) or not isinstance(candidates, int)
+                or not 1 <= candidates <= MAX_SAMPLES_PER_CAMERA_SAMPLE):
+            raise ValueError(f"ris candidates must be a whole number in 1 .. {MAX_SAMPLES_PER_CAMERA_SAMPLE}, "
+                             f"got {candidates!r}")
         if sources == "light+bsdf" and candidates < 2:
             raise ValueError("ris with light+bsdf candidates needs at least 2")
         bsdf = candidates // 2 if sources == "light+bsdf" else 0
