@@ -133,3 +133,51 @@ def test_stale_temporaries_are_removed_by_the_next_write(tmp_path):
     atomic.write_text(target, "x")
     assert not stale.exists() and fresh.exists() and all(p.exists() for p in others)
     assert target.read_text() == "x"
+
+
+@pytest.mark.parametrize("failing", ["metrics.json", "index.html", "mis.exr"])
+def test_a_failed_report_leaves_the_old_one_whole(failing, tmp_path, monkeypatch, capsys):
+    """Issue 38.5: a full disk while `compare` writes its report (injected: the flush of one of
+    its files fails with ENOSPC) left new EXRs and PNGs beside the old index.html, metrics.json
+    and viewer_data.js. The report is now written into a stage and moved in whole: compared are
+    the exit status (2), the one error line (naming the report's file, not the stage's) and
+    every file of the folder (byte for byte the first report's, no stage left)."""
+    scene = str(Path(__file__).resolve().parent.parent / "tracer" / "scenes" / "cornell.toml")
+    ref, out = tmp_path / "ref.exr", tmp_path / "cmp"
+    # 256 spp: far less noise than the 2-spp renders', so compare warns of nothing.
+    assert main(["reference", scene, "-o", str(ref), "--width", "8", "--height", "8", "--spp", "256",
+                 "--quiet"]) == 0
+    command = ["compare", scene, "--reference", str(ref), "--spp", "2", "--out", str(out), "--quiet",
+               "--strategies", "light,mis"]
+    assert main(command) == 0
+    old = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert failing in old
+    real_sync = atomic._sync
+
+    def failing_sync(path, directory=False):
+        if not directory and Path(path).name.startswith(f".{Path(failing).stem}.") \
+                and str(path).endswith(Path(failing).suffix):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        real_sync(path, directory)
+
+    monkeypatch.setattr(atomic, "_sync", failing_sync)
+    capsys.readouterr()
+    assert main(command + ["--seed", "9"]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert line.startswith(f"tracer: error: {out / failing}: cannot write: ") and "No space left" in line, line
+    assert "nothing in the folder was changed" in line and atomic.STAGE_TAG not in line, line
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == old
+
+
+def test_a_report_without_a_viewer_removes_the_old_viewer_data(tmp_path):
+    """A report whose viewer is left out (too big) moved in over one that had it takes the old
+    viewer data away with it, so that the page and the data never disagree."""
+    folder = tmp_path / "cmp"
+    folder.mkdir()
+    (folder / "viewer_data.js").write_text("old")
+    (folder / "index.html").write_text("old")
+    with atomic.staged_folder(folder) as stage:
+        atomic.write_text(stage.path / "index.html", "new")
+        stage.remove("viewer_data.js")
+    assert sorted(p.name for p in folder.iterdir()) == ["index.html"]
+    assert (folder / "index.html").read_text() == "new"

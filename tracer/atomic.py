@@ -1,16 +1,21 @@
 """Atomic file writes: a temporary file in the target's folder, then a rename.
 
 Every file tracer writes (EXR, PNG, JSON, CSV, HTML, charts) goes through here, so an
-interrupted run never leaves a torn file: readers see the old file or the new one.
+interrupted run never leaves a torn file: readers see the old file or the new one. A set of
+files that only make sense together (a comparison report: its page, tables and images) is
+written into a stage folder first and moved in only when every file is written
+(:func:`staged_folder`), so a full disk leaves the old set, not a mixture.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
+import shutil
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from .errors import InputError
@@ -98,7 +103,10 @@ def _write_failure(exc: BaseException, tmp: str, folder: Path) -> str:
             reason = f"no space left on the device ({free.f_bavail * free.f_frsize} bytes free); {reason}"
     except OSError:
         pass
-    return f"cannot write: {reason}; the existing file, if any, is unchanged"
+    return f"cannot write: {reason}{UNCHANGED}"
+
+
+UNCHANGED = "; the existing file, if any, is unchanged"
 
 
 # A temporary file left by a process that was killed (SIGKILL cannot be caught) while writing:
@@ -173,3 +181,73 @@ def bytes_writer(data: bytes) -> Callable[[str], None]:
 def save_figure(fig, path: str | os.PathLike[str], dpi: int = 100) -> None:
     """Save a matplotlib figure atomically."""
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi))
+
+
+class Stage:
+    """The folder a :func:`staged_folder` block writes into (``path``), and the names of files
+    of the target folder that the new set no longer has and that go when it is moved in."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.obsolete: set[str] = set()
+        # The file moved in last: a set's entry point (a report's page), which names the others.
+        self.entry: str | None = None
+
+    def remove(self, name: str) -> None:
+        """Remove the file ``name`` from the target folder when the stage is moved in."""
+        self.obsolete.add(name)
+
+
+STAGE_TAG = f".{TEMPORARY_TAG}stage-"
+
+
+@contextlib.contextmanager
+def staged_folder(folder: str | os.PathLike[str]) -> Iterator[Stage]:
+    """Write a set of files into ``folder`` all at once: the block writes them into a hidden
+    stage folder inside ``folder`` (``Stage.path``); when it ends normally, each file is moved
+    over its namesake in ``folder`` (renames within one folder: no space needed, nothing torn)
+    and the files the block named with ``Stage.remove`` are deleted. If the block fails (a full
+    disk, an interrupt), the stage is deleted and ``folder`` is as it was; an InputError then
+    names ``folder``'s file rather than the stage's. Stages left by a killed process are
+    deleted once older than STALE_SECONDS."""
+    target = Path(folder)
+    target.mkdir(parents=True, exist_ok=True)
+    _remove_stale_stages(target)
+    try:
+        stage = Stage(Path(tempfile.mkdtemp(prefix=STAGE_TAG, dir=target)))
+    except OSError as exc:
+        raise InputError(f"cannot write: {exc.strerror or exc}", str(target)) from None
+    try:
+        try:
+            yield stage
+        except InputError as exc:
+            message = str(exc).replace(str(stage.path), str(target)).replace(UNCHANGED, "")
+            raise InputError(f"{message}; nothing in the folder was changed") from None
+        names = sorted(os.listdir(stage.path), key=lambda name: (name == stage.entry, name))
+        for name in names:
+            if (stage.path / name).is_dir():
+                raise InputError("a stage holds files only, not folders", str(stage.path / name))
+        for name in names:
+            try:
+                os.replace(stage.path / name, target / name)
+            except OSError as exc:
+                raise InputError(f"cannot move the new file in: {exc.strerror or exc}", str(target / name)) from None
+        for name in sorted(stage.obsolete - set(names)):
+            with contextlib.suppress(FileNotFoundError):
+                (target / name).unlink()
+        _sync(target, directory=True)
+    finally:
+        shutil.rmtree(stage.path, ignore_errors=True)
+
+
+def _remove_stale_stages(folder: Path) -> None:
+    """Delete stage folders in ``folder`` untouched for longer than STALE_SECONDS (a process
+    killed while writing a report leaves one)."""
+    try:
+        now = time.time()
+        for entry in os.scandir(folder):
+            if entry.name.startswith(STAGE_TAG) and entry.is_dir(follow_symlinks=False) \
+                    and now - entry.stat(follow_symlinks=False).st_mtime > STALE_SECONDS:
+                shutil.rmtree(entry.path, ignore_errors=True)
+    except OSError:
+        pass  # tidying up is a courtesy

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ..atomic import save_figure, write_text
+from ..atomic import save_figure, staged_folder, write_text
 from ..film import Film
 from ..imagefiles import to_srgb8, write_exr, write_png
 from . import metrics, viewer
@@ -611,8 +611,26 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
                 crops: list[tuple[int, int, int, int]] | None, exposure: float,
                 target: float, figure_formats: tuple[str, ...] = ("png",)) -> dict[str, Any]:
     """Write every file of a comparison into ``out`` and return the metrics document. Charts
-    and maps are written in each of ``figure_formats`` (PNG always: the page shows it)."""
-    out.mkdir(parents=True, exist_ok=True)
+    and maps are written in each of ``figure_formats`` (PNG always: the page shows it).
+
+    The files are written into a stage and moved into ``out`` together (``atomic.staged_folder``),
+    the page last: if any write fails (a full disk), ``out`` keeps the report it had, instead of
+    new images beside an old page, tables and viewer data."""
+    with staged_folder(out) as stage:
+        stage.entry = "index.html"
+        document, omitted = _write_report(stage.path, scene_name, reference_path, reference, runs, mode,
+                                          sweep, allocation, crops, exposure, target, figure_formats)
+        if omitted:
+            stage.remove(viewer.DATA_FILE)  # an older report's viewer data would contradict the page
+    return document
+
+
+def _write_report(out: Path, scene_name: str, reference_path: str, reference: Film, runs: list[Run],
+                  mode: dict[str, Any], sweep: list[dict[str, Any]], allocation: list[Run],
+                  crops: list[tuple[int, int, int, int]] | None, exposure: float, target: float,
+                  figure_formats: tuple[str, ...]) -> tuple[dict[str, Any], str | None]:
+    """:func:`make_report`'s files, written into ``out``; the document and the reason the
+    viewer was left out (None: it was written)."""
     clock = mode.get("clock", "wall")
     formats = tuple(figure_formats)
     images: dict[str, list[list[str]]] = {}
@@ -681,4 +699,4 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
                           "written": omitted is None}
     write_tables(out, document)
     write_index(out, document, images, omitted)
-    return document
+    return document, omitted
