@@ -91,9 +91,12 @@ def table(materials: list[tuple[str, str, dict[str, object]]], twosided: list[bo
     material reflects on both sides (default: all do, as tracer's TOML materials)."""
     rows = [np.zeros(0)]
     kinds = [NONE]
-    for _, type_name, values in materials:
+    for name, type_name, values in materials:
         kind = TYPES[type_name]
-        rows.append(kind.row(values))
+        try:
+            rows.append(kind.row(values))
+        except ValueError as exc:  # a value outside its parameter's range (Param.check)
+            raise ValueError(f"material '{name}' ({type_name}): {exc}") from None
         kinds.append(kind.code)
     width = max(len(r) for r in rows)
     params = np.zeros((len(rows), max(width, 1)))

@@ -58,6 +58,24 @@ class Param:
     boolean: bool = False
     late: bool = False
 
+    def check(self, value: object) -> None:
+        """Raise ValueError unless ``value`` (a number, or ``size`` numbers) is finite and within
+        this parameter's range: the range is what every reader must enforce, since a value
+        outside it may not render finite (``tests/test_material_bounds.py``)."""
+        if self.choices or self.boolean:
+            return
+        values = np.asarray(value, dtype=np.float64).ravel()
+        bad = ~np.isfinite(values)
+        if self.lo is not None:
+            bad |= (values <= self.lo) if self.lo_open else (values < self.lo)
+        if self.hi is not None:
+            bad |= values > self.hi
+        if bad.any():
+            low = "" if self.lo is None else f"{'>' if self.lo_open else '>='} {self.lo:g}"
+            high = "" if self.hi is None else f"<= {self.hi:g}"
+            raise ValueError(f"{self.name} = {values[np.argmax(bad)]:g} is outside its range "
+                             f"({' and '.join(filter(None, (low, high))) or 'finite'})")
+
     def encode(self, value: object) -> object:
         """``value`` as the column(s) hold it: a choice's index, a boolean's 0 or 1."""
         if self.choices:
@@ -108,6 +126,7 @@ class MaterialType:
             value = values.get(p.name, p.default)
             if value is None:
                 raise ValueError(f"material {self.name!r} needs {p.name!r}")
+            p.check(value)
             column = self.column(p.name)
             out[column: column + p.size] = np.broadcast_to(np.asarray(p.encode(value), dtype=np.float64),
                                                            (p.size,))

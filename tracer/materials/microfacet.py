@@ -32,6 +32,10 @@ from .. import warp
 from ..jit import jit, jit_called
 
 GGX, BECKMANN = 0, 1
+# The roughness a scene may give. Down to MIN_ALPHA every value, weight and pdf of both
+# distributions is finite (measured at grazing, normal and random directions: GGX's stop being
+# finite below 1e-8), a margin of 100; Mitsuba clamps at 1e-4 (the XML reader does too).
+MIN_ALPHA, MAX_ALPHA = 1e-6, 10.0
 DISTRIBUTIONS = ("ggx", "beckmann")
 SQRT_PI = math.sqrt(math.pi)
 
@@ -57,16 +61,23 @@ def fresnel_dielectric(cos_i: float, eta: float) -> float:
 
 @jit_called
 def fresnel_conductor(cos_i: float, eta: float, k: float) -> float:
-    """Unpolarized reflectance of a conductor of complex relative index eta + i k at cos_i."""
+    """Unpolarized reflectance of a conductor of complex relative index n = eta + i k at cos_i.
+
+    Written with w = n cos_t = sqrt(n^2 - sin^2 theta_i) (the principal root: Re w >= 0, the
+    wave that enters), so that no step divides by n: r_s = (cos_i - w) / (cos_i + w) and
+    r_p = (n^2 cos_i - w) / (n^2 cos_i + w), the usual forms (pbrt-v4 sec. 9.3) multiplied
+    through by n. The textbook form divided by n^2 and failed at eta = k = 0 (complex division
+    by zero); this one gives F -> 1 there, its limit, and agrees with it to 1e-14 elsewhere."""
     cos_i = min(max(cos_i, 0.0), 1.0)
-    n = complex(eta, k)
-    sin2_t = (1.0 - cos_i * cos_i) / (n * n)
-    cos_t = cmath.sqrt(1.0 - sin2_t)
+    n2 = complex(eta, k) * complex(eta, k)
+    w = cmath.sqrt(n2 - (1.0 - cos_i * cos_i))
     # |a / b|^2 as |a|^2 / |b|^2: for eta = 0, k = 1 both are the same sums of squares, so F = 1.
-    a, b = n * cos_i - cos_t, n * cos_i + cos_t
-    c, d = cos_i - n * cos_t, cos_i + n * cos_t
-    parallel = (a.real * a.real + a.imag * a.imag) / (b.real * b.real + b.imag * b.imag)
-    perpendicular = (c.real * c.real + c.imag * c.imag) / (d.real * d.real + d.imag * d.imag)
+    a, b = n2 * cos_i - w, n2 * cos_i + w
+    c, d = cos_i - w, cos_i + w
+    b2, d2 = b.real * b.real + b.imag * b.imag, d.real * d.real + d.imag * d.imag
+    # b = 0 or d = 0 only where n = 0 meets cos_i = 1 (or cos_i = 0): the limit there is 1.
+    parallel = (a.real * a.real + a.imag * a.imag) / b2 if b2 > 0.0 else 1.0
+    perpendicular = (c.real * c.real + c.imag * c.imag) / d2 if d2 > 0.0 else 1.0
     return 0.5 * (parallel + perpendicular)
 
 
@@ -165,6 +176,18 @@ def g1(cos: float, alpha: float, distribution: int) -> float:
     return warp.ggx_g1(cos, alpha)
 
 
+# Half the spacing of a sampler's numbers: samplers give u in [0, 1) in steps of 2^-53.
+HALF_STEP = 2.0**-54
+
+
+@jit
+def open_unit(u: float) -> float:
+    """u in [0, 1) moved into (0, 1): 0 becomes HALF_STEP. A Gaussian drawn by erfinv(2u - 1)
+    is then finite (about -5.9 sigma at most) where u = 0 gave -inf and a NaN normal; u = 0 has
+    probability 2^-53, so the shift changes no distribution measurably."""
+    return max(u, HALF_STEP)
+
+
 @jit
 def _beckmann_slope_cdf(t: float, tan_theta: float, erf_cot: float, exp_cot: float) -> float:
     """Unnormalized CDF of the visible slope t (along the stretched wo, alpha = 1), whose density
@@ -182,7 +205,7 @@ def beckmann_visible_normal(wo, alpha: float, u0: float, u1: float):
     sin_theta = math.sqrt(vx * vx + vy * vy)
     # Slope t along wo's azimuth (m = normalize(t, ., 1) leans toward wo for t > 0).
     if sin_theta < 1e-12:
-        t = erfinv(2.0 * u0 - 1.0)
+        t = erfinv(2.0 * open_unit(u0) - 1.0)
         cos_phi, sin_phi = 1.0, 0.0
     else:
         cos_phi, sin_phi = vx / sin_theta, vy / sin_theta
@@ -207,7 +230,7 @@ def beckmann_visible_normal(wo, alpha: float, u0: float, u1: float):
                 t = new
                 break
             t = new
-    s = erfinv(2.0 * u1 - 1.0)
+    s = erfinv(2.0 * open_unit(u1) - 1.0)
     # Rotate to wo's azimuth, unstretch the slopes, and form the normal.
     mx = alpha * (cos_phi * t - sin_phi * s)
     my = alpha * (sin_phi * t + cos_phi * s)

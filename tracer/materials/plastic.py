@@ -38,12 +38,16 @@ from . import microfacet
 from .base import DELTA, DIFFUSE, MaterialType, Param, rgb
 
 CODE = 5  # the dispatch code (``tracer.materials``)
+# Indices of refraction in [MIN_IOR, MAX_IOR], so that eta = int_ior / ext_ior lies in [1e-4, 1e4]:
+# every such coating renders finite (measured to 1e-5 .. 1e5); real ones lie in 1 .. 4, and an
+# index near 0 divided by 0 (int_ior 1e-300: ZeroDivisionError) or overflowed (ext_ior 1e-300).
+MIN_IOR, MAX_IOR = 0.01, 100.0
 # Mitsuba 3's defaults: polypropylene inside, air outside.
 COATING_PARAMS = (
     Param("diffuse_reflectance", 3, lo=0.0, hi=1.0, default=0.5, doc="base albedo per channel"),
     Param("specular_reflectance", 3, lo=0.0, hi=1.0, default=1.0, doc="coating reflection scale"),
-    Param("int_ior", 1, lo=0.0, lo_open=True, hi=100.0, default=1.49, doc="index inside the coating"),
-    Param("ext_ior", 1, lo=0.0, lo_open=True, hi=100.0, default=1.000277, doc="index outside"),
+    Param("int_ior", 1, lo=MIN_IOR, hi=MAX_IOR, default=1.49, doc="index inside the coating"),
+    Param("ext_ior", 1, lo=MIN_IOR, hi=MAX_IOR, default=1.000277, doc="index outside"),
     Param("nonlinear", 1, default=False, boolean=True, doc="colour shift of internal bounces"),
 )
 COATING_DERIVED = (Param("eta", 1), Param("inv_eta2", 1), Param("specular_weight", 1), Param("fdr_int", 1))

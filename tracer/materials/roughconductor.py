@@ -29,7 +29,7 @@ CODE = 2  # the dispatch code (``tracer.materials``)
 TYPE = MaterialType(
     "roughconductor", code=CODE, lobes=GLOSSY, doc="microfacet metal (GGX or Beckmann), conductor Fresnel",
     params=(Param("reflectance", 3, lo=0.0, hi=1.0, doc="scale per channel"),
-            Param("alpha", 1, lo=0.0, lo_open=True, hi=10.0, doc="roughness, used as given"),
+            Param("alpha", 1, lo=microfacet.MIN_ALPHA, hi=microfacet.MAX_ALPHA, doc="roughness, used as given"),
             replace(ETA_PARAM, late=True), replace(K_PARAM, late=True),
             Param("distribution", 1, default="ggx", choices=microfacet.DISTRIBUTIONS, late=True,
                   doc="microfacet distribution")))

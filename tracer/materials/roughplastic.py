@@ -62,7 +62,7 @@ def _derive(values: dict[str, object]) -> dict[str, object]:
 TYPE = MaterialType(
     "roughplastic", code=CODE, lobes=GLOSSY | DIFFUSE, doc="diffuse base under a rough coating",
     params=COATING_PARAMS + (
-        Param("alpha", 1, lo=0.0, lo_open=True, hi=10.0, default=0.1, doc="coating roughness"),
+        Param("alpha", 1, lo=microfacet.MIN_ALPHA, hi=microfacet.MAX_ALPHA, default=0.1, doc="coating roughness"),
         Param("distribution", 1, default="beckmann", choices=microfacet.DISTRIBUTIONS,
               doc="microfacet distribution")),
     derived=(Param("eta", 1), Param("inv_eta2", 1), Param("specular_weight", 1),

@@ -25,7 +25,8 @@ import numpy as np
 
 from .. import materials
 from ..camera import Camera
-from ..errors import one_line
+from ..errors import InputError, one_line
+from ..materials import conductor, plastic
 from ..record import MAX_SAMPLE_INDEX
 from . import spectrum
 from .mesh import MeshError, angle_weighted_normals, read_mesh_file
@@ -667,7 +668,8 @@ class _SceneReader:
         if name is not None and (p.has("eta") or p.has("k")):
             p.fail("give material or eta and k, not both")
         if name is None or name == "none":
-            return p.color("eta", 0.0, "other"), p.color("k", 1.0, "other")
+            return (p.color("eta", 0.0, "other", hi=conductor.MAX_INDEX),
+                    p.color("k", 1.0, "other", hi=conductor.MAX_INDEX))
         from ..materials.presets import CONDUCTORS
 
         if name not in CONDUCTORS:
@@ -692,7 +694,7 @@ class _SceneReader:
                 element.fail(f"unknown IOR name '{text}' (Mitsuba's names: {', '.join(IORS)})", p.element)
             return IORS[key]
         value = number(element, text, name)
-        p._check(element, value, 0.0, 100.0, lo_open=True)
+        p._check(element, value, plastic.MIN_IOR, plastic.MAX_IOR)
         return value
 
     def roughness(self, p: _Plugin) -> dict[str, object]:
@@ -730,7 +732,10 @@ class _SceneReader:
 
     def scene(self, camera: Camera) -> Scene:
         g = self.geometry
-        table = materials.table(self.triples, self.sides)
+        try:
+            table = materials.table(self.triples, self.sides)
+        except ValueError as exc:  # the parameter ranges every reader is held to (Param.check)
+            raise InputError(str(exc), self.document.path) from None
         return g.scene(self.document.path, camera, table, self.positions, self.intensities, self.render)
 
 

@@ -311,7 +311,10 @@ def _read_materials(path: str, table: Any) -> materials.MaterialTable:
         m.done()
         triples.append((name, kind.name, values))
     top.done()
-    return materials.table(triples, sides)
+    try:
+        return materials.table(triples, sides)
+    except ValueError as exc:  # unreachable while the checks above hold each Param's range
+        raise InputError(str(exc), path) from None
 
 
 class _Geometry:
