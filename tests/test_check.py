@@ -172,6 +172,9 @@ DAMAGED_ENTRIES = {
     "no samples at all": ({"strategy": "light", "light_samples": 0}, "entries[0]"),
     "scene missing": ({"scene": None}, "entries[0].scene"),
     "more seeds than the check handles": ({"seeds": list(range(1, 66))}, "entries[0].seeds"),
+    # Issue 38 (smaller): 1e308 passed and its square overflowed with a numpy warning when judged.
+    "image means past float32": ({"image_means": [[1e308, 1.0, 1.0]]}, "entries[0].image_means"),
+    "variance past float32": ({"variance": 1e300}, "entries[0].variance"),
 }
 
 
@@ -592,3 +595,37 @@ def test_sobol_baseline_passes_and_catches_lost_structure(write_scene, tmp_path,
     failed = {v.measure for v in result.verdicts if not v.ok}
     assert "relmse" in failed, format_table(result.verdicts)
     assert "image mean" not in failed
+
+
+@pytest.mark.parametrize("where", ["baseline", "entry's scene", "device"])
+def test_a_baseline_or_scene_that_is_not_a_regular_file_is_refused_at_once(where, tmp_path, capsys):
+    """Issue 38.8: `--baseline FIFO`, and a baseline entry whose scene is a FIFO, blocked
+    `tracer check` forever (opening a FIFO waits for a writer); `--baseline /dev/zero` read until
+    memory ran out. Each is refused with exit 2 and one line naming the file, without reading
+    it. Run in a child process with a timeout far above the refusal's (milliseconds), so that a
+    regression fails instead of hanging the suite."""
+    import os
+    import subprocess
+    import sys
+
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    if where == "baseline":
+        baseline, named = fifo, fifo
+    elif where == "device":
+        baseline, named = Path("/dev/zero"), Path("/dev/zero")
+    else:
+        from tracer.film import Film
+        from tracer.imagefiles import write_exr
+
+        write_exr(tmp_path / "ref.exr", Film(4, 4, np.full(16, 8), np.ones((16, 3)), np.ones((16, 3))))
+        baseline, named = tmp_path / "baseline.json", fifo
+        baseline.write_text(json.dumps({"entries": [{**GOOD_ENTRY, "seeds": [1, 2, 3, 4, 5, 6],
+                                                     "scene": str(fifo), "reference": "ref.exr"}]}))
+    # --update: the entry has nothing to judge against, and is measured, its scene read.
+    update = ["--update"] if where == "entry's scene" else []
+    done = subprocess.run([sys.executable, "-m", "tracer", "check", "--baseline", str(baseline), *update],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(named) in lines[0] and "not a regular file" in lines[0], done.stderr

@@ -20,6 +20,7 @@ import numpy as np
 from .. import materials
 from ..camera import Camera
 from ..errors import InputError
+from ..inputfiles import read_regular_file
 from ..record import MAX_SAMPLE_INDEX
 from ..sampler_choice import SAMPLERS
 from ..strategy import LIGHT_SAMPLINGS, STRATEGIES
@@ -47,22 +48,13 @@ def read_toml_file(path: str) -> dict[str, Any]:
     """The parsed TOML document of ``path``; unreadable, invalid or hostile files (nesting
     that exhausts the parser, integers past Python's digit limit, dotted keys thousands of
     parts deep, which tomllib parses in quadratic time) raise InputError quickly."""
+    data = read_regular_file(path, MAX_SCENE_BYTES, "scene file")
     try:
-        with open(path, "rb") as fh:
-            data = fh.read(MAX_SCENE_BYTES + 1)
-        if len(data) > MAX_SCENE_BYTES:
-            raise InputError(f"larger than {MAX_SCENE_BYTES >> 20} MiB: not a scene file", path)
         text = data.decode("utf-8")
         _refuse_deep_keys(text, path)
         return tomllib.loads(text)
     except RecursionError:
         raise InputError("not valid TOML: nested too deeply", path) from None
-    except FileNotFoundError:
-        raise InputError("no such scene file", path) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, not a scene file", path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path) from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"not valid TOML: {exc}", path) from None
     except UnicodeDecodeError:

@@ -81,6 +81,7 @@ import numpy as np
 
 from ..atomic import write_text
 from ..errors import InputError
+from ..inputfiles import read_regular_file
 from ..film import Film, merge_renders
 from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
 from ..render_loop import RenderResult, RenderSettings, render_complete
@@ -109,6 +110,8 @@ BASELINE_NAME = "tracer_baseline.json"  # the default baseline, in the current f
 # Most seeds an entry may have: 8 reach the levels of files of up to 32 entries, 12 of thousands;
 # the exact Mann-Whitney test and --update's resampling grow costly beyond.
 MAX_SEEDS = 64
+# A baseline of a thousand entries of 64 seeds is under 10 MiB; a larger file is not a baseline.
+MAX_BASELINE_BYTES = 64 << 20
 # Largest spp factor --update looks for when an entry is too heavy-tailed for its t-test
 # against the reference (64: 1024 spp for a 16-spp entry).
 MAX_SPP_FACTOR = 64
@@ -248,11 +251,10 @@ def default_baseline() -> Path:
 def load_baseline(path: str | os.PathLike[str]) -> list[Entry]:
     """Read and validate a baseline file."""
     path = str(path)
+    data = read_regular_file(path, MAX_BASELINE_BYTES, "baseline file",
+                             missing="no such baseline file (make one with tracer check --create)")
     try:
-        with open(path) as fh:
-            doc = json.load(fh)
-    except FileNotFoundError:
-        raise InputError("no such baseline file (make one with tracer check --create)", path) from None
+        doc = json.loads(data)
     except RecursionError:
         raise InputError("not a baseline: JSON nested too deeply", path) from None
     except (OSError, ValueError) as exc:
@@ -289,9 +291,14 @@ def _is_int(value: Any, lo: int, hi: int = 2**53) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and lo <= value <= hi
 
 
+# The largest number a baseline may hold: every one is measured from float32 render files
+# (1e308 passed, and its square overflowed with a numpy warning when judged).
+MAX_BASELINE_NUMBER = 3.4028234e38
+
+
 def _is_number(value: Any) -> bool:
     return (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-            and value >= 0)
+            and 0 <= value <= MAX_BASELINE_NUMBER)
 
 
 def _field_problem(name: str, value: Any, raw: dict[str, Any]) -> str | None:
@@ -324,12 +331,12 @@ def _field_problem(name: str, value: Any, raw: dict[str, Any]) -> str | None:
         distinct = ok and len(set(value)) == len(value)
         return None if distinct else f"a list of 1 to {MAX_SEEDS} distinct whole seeds >= 0"
     if name in ("relmse", "variance"):
-        return None if value is None or _is_number(value) else "a finite number >= 0"
+        return None if value is None or _is_number(value) else "a number in 0 .. 3.4e38"
     if name in ("relmse_seeds", "variance_seeds"):
         seeds = raw.get("seeds")
         ok = isinstance(value, list) and all(_is_number(v) for v in value) and (
             not isinstance(seeds, list) or len(value) == len(seeds))
-        return None if value is None or ok else "a list of finite numbers >= 0, one per seed"
+        return None if value is None or ok else "a list of numbers in 0 .. 3.4e38, one per seed"
     if name == "image_means":  # their number is checked when judging: --update replaces stale ones
         ok = isinstance(value, list) and all(
             isinstance(v, list) and len(v) == 3 and all(_is_number(c) for c in v) for v in value)
