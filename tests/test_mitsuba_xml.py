@@ -1053,6 +1053,38 @@ def test_render_reference_compare_and_check_take_xml_scenes(tmp_path, capsys):
                    "paths of two or more bounces)"]
 
 
+def test_substitution_is_bounded_while_it_is_done(tmp_path):
+    """$name defaults that double at every step, used many times: one attribute made of 256 uses
+    of a default just under the attribute limit (128 Mi characters) is refused before it is
+    built, and 100 attributes of one use each (50 Mi characters in all) when the whole scene's
+    substitutions pass MAX_SUBSTITUTED_TOTAL, each in one line naming the file, line, element
+    and attribute, with little memory (a 1 MB file of such attributes took 4 GB and 48 s)."""
+    import tracemalloc
+
+    doubled = ('<default name="a0" value="x"/>'
+               + "".join(f'<default name="a{i + 1}" value="$a{i}$a{i}"/>' for i in range(19)))  # $a19: 2^19
+    cases = {
+        "one": (f'<shape type="cube" id="{"$a19" * 256}"/>', '<shape type="cube" id="$a19$a19',
+                "attribute 'id' is longer than 1048576 characters", 4 * document.MAX_SUBSTITUTED),
+        "many": ("".join(f'<bsdf type="diffuse" id="$a19-{i}"/>' for i in range(100)),
+                 '<bsdf type="diffuse" id="$a19-30">', "attribute 'id': substituting $names makes more than",
+                 24 * document.MAX_SUBSTITUTED),  # MAX_SUBSTITUTED_TOTAL is 16 of them
+    }
+    for name, (body, element, words, most_bytes) in cases.items():
+        path = tmp_path / f"{name}.xml"
+        path.write_text(f'<scene version="3.0.0">{doubled}\n{body}</scene>')
+        tracemalloc.start()
+        try:
+            with pytest.raises(InputError) as caught:
+                document.read_document(str(path))
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        message = str(caught.value)
+        assert message.startswith(f"{path}:2: {element}") and words in message, message
+        assert len(message) < 400 and peak < most_bytes, (name, len(message), peak)
+
+
 def test_hostile_documents_are_refused_in_one_line(tmp_path):
     """Found by an adversarial run: an unknown encoding (expat raised LookupError), $name
     defaults that double at every step (a billion laughs without entities: memory ran away),

@@ -21,7 +21,10 @@ Mitsuba 3.9.1's, checked by loading small scenes with it (``tests/test_mitsuba_x
   (left-multiplied): ``<translate x="1"/><scale value="2"/>`` moves the origin to x = 2.
 
 Parsing uses expat, which reports lines; DOCTYPE and entity declarations are refused outright
-(no entity expansion, so no "billion laughs").
+(no entity expansion, so no "billion laughs"). ``$name`` substitution, the other way to make a
+small file expand (a default that repeats another, doubling at every step), is measured while
+it is done: an attribute may not grow past MAX_SUBSTITUTED characters, nor all of them together
+past MAX_SUBSTITUTED_TOTAL, and the string past the limit is never built.
 """
 
 from __future__ import annotations
@@ -43,6 +46,12 @@ MAX_INCLUDE_DEPTH = 16
 MAX_FILES = 1000  # files read through includes, in all
 MAX_NESTING = 64  # elements inside elements, includes spliced in
 MAX_SUBSTITUTED = 1 << 20  # characters of an attribute after $name substitution
+# Characters that $name substitution may add in the whole document. A scene's parameters are
+# numbers and names a few characters long (an spp, a resolution, a colour), so this is far
+# beyond any scene; without it, thousands of attributes each a little under MAX_SUBSTITUTED
+# would still make gigabytes (a 1 MB file reached 4 GB). It bounds the text substitution
+# makes to 16 Mi characters (at most 64 MB).
+MAX_SUBSTITUTED_TOTAL = 16 * MAX_SUBSTITUTED
 
 OBJECT_TAGS = frozenset({"scene", "bsdf", "emitter", "shape", "sensor", "film", "sampler", "integrator",
                          "rfilter", "texture", "medium", "phase", "volume"})
@@ -178,7 +187,7 @@ def _parse_file(path: str, shown: str) -> Element:
     """The element tree of one XML file; ``shown`` names it in messages."""
     try:
         with open(path, "rb") as fh:
-            data = fh.read(MAX_FILE_BYTES + 1)
+            data = _read_at_most(fh, MAX_FILE_BYTES + 1)
     except FileNotFoundError:
         raise InputError("no such scene file", shown) from None
     except IsADirectoryError:
@@ -229,6 +238,16 @@ def _parse_file(path: str, shown: str) -> Element:
     return roots[0]
 
 
+def _read_at_most(fh, limit: int) -> bytes:
+    """The first ``limit`` bytes of ``fh``, read a megabyte at a time: ``fh.read(limit)`` would
+    take ``limit`` bytes of memory for any file, however small."""
+    chunks, size = [], 0
+    while size < limit and (chunk := fh.read(min(1 << 20, limit - size))):
+        chunks.append(chunk)
+        size += len(chunk)
+    return b"".join(chunks)
+
+
 class _Expansion:
     """Splices includes in, substitutes ``$name``, collects ``<path>`` folders and aliases."""
 
@@ -237,18 +256,36 @@ class _Expansion:
         self.search_folders: list[Path] = []
         self.aliases: list[Element] = []
         self.files = 1
+        self.substituted = 0  # characters $name substitution has added, in all files
         self.top = top
 
     def substitute(self, element: Element) -> None:
-        for key, value in element.attrs.items():
-            if "$" in value:
-                value = _SUBSTITUTION.sub(lambda m: self._value_of(m, element), value)
-                # Defaults that repeat one another grow exponentially (a billion laughs made of
-                # $names): refuse a value past any plausible size as soon as one appears.
-                if len(value) > MAX_SUBSTITUTED:
-                    element.fail(f"attribute '{key}' is longer than {MAX_SUBSTITUTED} characters after "
-                                 "substituting $names")
-                element.attrs[key] = value
+        """``$name`` replaced in each attribute of ``element``. The size is counted as the value
+        is put together, so that a value past MAX_SUBSTITUTED (a default that repeats another
+        doubles at every step: a billion laughs made of $names) or a document past
+        MAX_SUBSTITUTED_TOTAL is refused before it is built."""
+        for key, text in element.attrs.items():
+            if "$" not in text:
+                continue
+            pieces, length, start = [], 0, 0
+            for match in _SUBSTITUTION.finditer(text):
+                value = self._value_of(match, element)
+                pieces += (text[start:match.start()], value)
+                length += match.start() - start + len(value)
+                self.substituted += len(value)
+                start = match.end()
+                self._check_size(element, key, length)
+            pieces.append(text[start:])
+            self._check_size(element, key, length + len(text) - start)
+            element.attrs[key] = "".join(pieces)
+
+    def _check_size(self, element: Element, key: str, length: int) -> None:
+        if length > MAX_SUBSTITUTED:
+            element.fail(f"attribute '{key}' is longer than {MAX_SUBSTITUTED} characters after "
+                         "substituting $names")
+        if self.substituted > MAX_SUBSTITUTED_TOTAL:
+            element.fail(f"attribute '{key}': substituting $names makes more than "
+                         f"{MAX_SUBSTITUTED_TOTAL} characters in the whole scene")
 
     def _value_of(self, match: re.Match, element: Element) -> str:
         name = match.group(1)
