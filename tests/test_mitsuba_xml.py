@@ -911,15 +911,26 @@ def test_the_feature_scene(tmp_path):
 def test_include_cycles_depth_and_roots(tmp_path):
     with pytest.raises(InputError, match="include cycle"):
         load_scene(DATA / "cycle_a.xml")
-    for i in range(20):
-        include = f'<include filename="d{i + 1}.xml"/>'
-        (tmp_path / f"d{i}.xml").write_text(f'<scene version="3.0.0">{include}</scene>')
-    (tmp_path / "d20.xml").write_text('<scene version="3.0.0"/>')
-    with pytest.raises(InputError, match="includes nested more than 16 deep"):
-        load_scene(tmp_path / "d0.xml")
     (tmp_path / "part.xml").write_text('<bsdf type="diffuse"/>')
     refused(tmp_path, '<include filename="part.xml"/>', "root element is <scene>")
     refused(tmp_path, '<include filename="nothere.xml"/>', "included file not found", line=3)
+
+
+@pytest.mark.parametrize("nested", [document.MAX_INCLUDE_DEPTH, document.MAX_INCLUDE_DEPTH + 1])
+def test_include_depth_limit_says_what_it_does(tmp_path, nested):
+    """MAX_INCLUDE_DEPTH (16) includes nested in one another load (the main file includes d1,
+    which includes d2, ... d16); one more is refused, naming the limit."""
+    for i in range(nested):
+        include = f'<include filename="d{i + 1}.xml"/>'
+        (tmp_path / f"d{i}.xml").write_text(f'<scene version="3.0.0">{include}</scene>')
+    (tmp_path / f"d{nested}.xml").write_text(f'<scene version="3.0.0">{SENSOR}</scene>')
+    if nested <= document.MAX_INCLUDE_DEPTH:
+        assert load_scene(tmp_path / "d0.xml").camera.width == 8
+    else:
+        with pytest.raises(InputError) as caught:
+            load_scene(tmp_path / "d0.xml")
+        message = str(caught.value)
+        assert f"d{nested - 1}.xml:1: <include>: more than 16 includes nested in one another" in message
 
 
 def test_ids_refs_and_aliases(tmp_path):

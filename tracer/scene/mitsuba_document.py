@@ -10,8 +10,8 @@ Mitsuba 3.9.1's, checked by loading small scenes with it (``tests/test_mitsuba_x
   order (a use before it is an error), unless ``name`` is already defined (the first wins); a
   default's own value is substituted when it is read; an undefined ``$name`` is an error.
 - ``<include filename>`` is relative to the including file's folder; the included file's
-  root is a ``<scene>`` whose children take the include's place. Cycles and includes deeper
-  than MAX_INCLUDE_DEPTH are refused.
+  root is a ``<scene>`` whose children take the include's place. Cycles and more than
+  MAX_INCLUDE_DEPTH nested includes are refused.
 - ``<path value>`` adds a folder (relative to the file that names it) searched for relative
   file names, before the scene file's folder; the latest ``<path>`` is searched first.
 - every object (``bsdf``, ``shape``, ...) may have an ``id``, unique in the scene;
@@ -42,6 +42,9 @@ import numpy as np
 from ..errors import InputError
 
 MAX_FILE_BYTES = 64 << 20  # far beyond any scene file (meshes live in their own files)
+# Includes inside includes: the main file may include a file that includes another, and so on,
+# this many times; one more is refused. Mitsuba 3.9.1 allows 14 (parser.cpp, parse_file_impl:
+# max_include_depth 15, counted from the main file at depth 0): tracer reads all it reads.
 MAX_INCLUDE_DEPTH = 16
 MAX_FILES = 1000  # files read through includes, in all
 MAX_NESTING = 64  # elements inside elements, includes spliced in
@@ -340,8 +343,8 @@ class _Expansion:
         real = os.path.realpath(path)
         if real in chain:
             include.fail(f"include cycle: {path} includes itself (through {len(chain)} file(s))")
-        if len(chain) >= MAX_INCLUDE_DEPTH:
-            include.fail(f"includes nested more than {MAX_INCLUDE_DEPTH} deep")
+        if len(chain) > MAX_INCLUDE_DEPTH:  # chain: this file and the files including it
+            include.fail(f"more than {MAX_INCLUDE_DEPTH} includes nested in one another")
         self.files += 1
         if self.files > MAX_FILES:
             include.fail(f"more than {MAX_FILES} files included")
