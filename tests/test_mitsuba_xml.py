@@ -1096,6 +1096,46 @@ def test_substitution_is_bounded_while_it_is_done(tmp_path):
         assert len(message) < 400 and peak < most_bytes, (name, len(message), peak)
 
 
+def test_huge_names_give_short_lines_quickly(tmp_path):
+    """An echoed user string (an id, a type, a property or attribute name, a $name, a conductor
+    or IOR name, an include's file name, a tag) of 8 MB is cut in the error line (errors.shown),
+    and the refusal takes about as long as parsing the file (a 60 MB material name gave a 60 MB
+    line after 78 s; folding its case once per conductor name took seconds)."""
+    import time
+
+    big = "m" * (8 << 20)
+    cases = {
+        "id": f'<shape type="cube"><bsdf type="dielectric" id="{big}"/></shape>',
+        "type": f'<shape type="cube"><bsdf type="{big}"/></shape>',
+        "property": f'<shape type="cube"><float name="{big}" value="1"/></shape>',
+        "ref": f'<shape type="cube"><ref id="{big}"/></shape>',
+        "duplicate": f'<bsdf type="diffuse" id="{big}"/><bsdf type="diffuse" id="{big}"/>',
+        "parameter": f'<shape type="cube" id="${big}"/>',
+        "attribute": f'<shape type="cube" {big}="1"/>',
+        "conductor": f'<shape type="cube"><bsdf type="conductor"><string name="material" value="{big}"/>'
+                     '</bsdf></shape>',
+        "ior": f'<shape type="cube"><bsdf type="plastic"><string name="int_ior" value="{big}"/></bsdf>'
+               '</shape>',
+        "number": f'<shape type="sphere"><float name="radius" value="{big}"/></shape>',
+        "include": f'<include filename="{big}"/>',
+        "mesh": f'<shape type="obj"><string name="filename" value="{big}"/></shape>',
+        "tag": f"<{big}/>",
+        "version": None,
+    }
+    for name, body in cases.items():
+        path = tmp_path / f"{name}.xml"
+        path.write_text(f'<scene version="3.{big}.0"/>' if body is None else
+                        f'<scene version="3.0.0">{SENSOR}{body}</scene>')
+        start = time.perf_counter()
+        with pytest.raises(InputError) as caught:
+            load_scene(path)
+        seconds = time.perf_counter() - start
+        message = str(caught.value)
+        # (at most the path, the element, 80 characters of the name and a list of Mitsuba's names)
+        assert "\n" not in message and len(message) < 1000 and "mmmm" in message, (name, message[:1100])
+        assert seconds < 10, (name, seconds)  # parsing 8 MB with expat takes about 0.3 s
+
+
 def test_hostile_documents_are_refused_in_one_line(tmp_path):
     """Found by an adversarial run: an unknown encoding (expat raised LookupError), $name
     defaults that double at every step (a billion laughs without entities: memory ran away),

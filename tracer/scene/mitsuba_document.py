@@ -39,7 +39,7 @@ from xml.parsers import expat
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, shown
 
 MAX_FILE_BYTES = 64 << 20  # far beyond any scene file (meshes live in their own files)
 # Includes inside includes: the main file may include a file that includes another, and so on,
@@ -100,9 +100,10 @@ class Element:
     children: list["Element"] = field(default_factory=list)
 
     def describe(self) -> str:
-        """``<tag type="..." id="..." name="...">``, the attributes that name it."""
-        shown = "".join(f' {k}="{self.attrs[k]}"' for k in ("type", "id", "name") if k in self.attrs)
-        return f"<{self.tag}{shown}>"
+        """``<tag type="..." id="..." name="...">``, the attributes that name it (each cut to
+        ``errors.shown``'s length)."""
+        naming = "".join(f' {k}="{shown(self.attrs[k])}"' for k in ("type", "id", "name") if k in self.attrs)
+        return f"<{shown(self.tag)}{naming}>"
 
     @property
     def where(self) -> str:
@@ -139,7 +140,7 @@ class Document:
         """The object a ``<ref id>`` stands for."""
         target = self.ids.get(ref.attr("id"))
         if target is None:
-            ref.fail(f"no object has id '{ref.attrs['id']}'")
+            ref.fail(f"no object has id '{shown(ref.attrs['id'])}'")
         return target
 
     def find_file(self, name: str, near: Element) -> Path:
@@ -179,33 +180,32 @@ def _check_version(scene: Element) -> None:
         scene.fail("missing attribute 'version' (Mitsuba 3 scenes say <scene version=\"3.0.0\">)")
     match = re.fullmatch(r"([0-9]{1,6})\.([0-9]{1,6})\.([0-9]{1,6})", version.strip())
     if not match:
-        shown = version if len(version) <= 40 else version[:37] + "..."
-        scene.fail(f"version '{shown}' is not of the form major.minor.patch")
+        scene.fail(f"version '{shown(version)}' is not of the form major.minor.patch")
     if int(match.group(1)) not in (2, 3):
-        scene.fail(f"version {version}: tracer reads Mitsuba 2 and 3 scenes; older scenes use other "
-                   "names (upgrade them with Mitsuba 3 first)")
+        scene.fail(f"version {version.strip()}: tracer reads Mitsuba 2 and 3 scenes; older scenes use "
+                   "other names (upgrade them with Mitsuba 3 first)")
 
 
-def _parse_file(path: str, shown: str) -> Element:
-    """The element tree of one XML file; ``shown`` names it in messages."""
+def _parse_file(path: str, label: str) -> Element:
+    """The element tree of one XML file; ``label`` names it in messages."""
     try:
         with open(path, "rb") as fh:
             data = _read_at_most(fh, MAX_FILE_BYTES + 1)
     except FileNotFoundError:
-        raise InputError("no such scene file", shown) from None
+        raise InputError("no such scene file", label) from None
     except IsADirectoryError:
-        raise InputError("is a directory, not a scene file", shown) from None
+        raise InputError("is a directory, not a scene file", label) from None
     except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", shown) from None
+        raise InputError(f"cannot read: {exc.strerror}", label) from None
     if len(data) > MAX_FILE_BYTES:
-        raise InputError(f"larger than {MAX_FILE_BYTES >> 20} MiB: not a scene file", shown)
+        raise InputError(f"larger than {MAX_FILE_BYTES >> 20} MiB: not a scene file", label)
 
     parser = expat.ParserCreate()
     stack: list[Element] = []
     roots: list[Element] = []
 
     def start(tag: str, attrs: dict[str, str]) -> None:
-        element = Element(tag, dict(attrs), shown, parser.CurrentLineNumber)
+        element = Element(tag, dict(attrs), label, parser.CurrentLineNumber)
         if len(stack) >= MAX_NESTING:
             element.fail(f"elements nested more than {MAX_NESTING} deep")
         (stack[-1].children if stack else roots).append(element)
@@ -217,7 +217,7 @@ def _parse_file(path: str, shown: str) -> Element:
     def refuse(what: str):
         def handler(*args) -> None:
             raise InputError(f"{what} are not allowed in a scene file (no entity expansion)",
-                             f"{shown}:{parser.CurrentLineNumber}")
+                             f"{label}:{parser.CurrentLineNumber}")
         return handler
 
     parser.StartElementHandler = start
@@ -231,13 +231,13 @@ def _parse_file(path: str, shown: str) -> Element:
         parser.Parse(data, True)
     except expat.ExpatError as exc:
         raise InputError(f"not well-formed XML: {expat.ErrorString(exc.code)} (column {exc.offset + 1})",
-                         f"{shown}:{exc.lineno}") from None
+                         f"{label}:{exc.lineno}") from None
     except LookupError as exc:  # an encoding declaration Python does not know
-        raise InputError(f"not readable XML: {exc}", shown) from None
+        raise InputError(f"not readable XML: {shown(exc)}", label) from None
     except RecursionError:
-        raise InputError("nested too deeply", shown) from None
+        raise InputError("nested too deeply", label) from None
     if not roots:
-        raise InputError("no XML element", shown)
+        raise InputError("no XML element", label)
     return roots[0]
 
 
@@ -284,16 +284,16 @@ class _Expansion:
 
     def _check_size(self, element: Element, key: str, length: int) -> None:
         if length > MAX_SUBSTITUTED:
-            element.fail(f"attribute '{key}' is longer than {MAX_SUBSTITUTED} characters after "
+            element.fail(f"attribute '{shown(key)}' is longer than {MAX_SUBSTITUTED} characters after "
                          "substituting $names")
         if self.substituted > MAX_SUBSTITUTED_TOTAL:
-            element.fail(f"attribute '{key}': substituting $names makes more than "
+            element.fail(f"attribute '{shown(key)}': substituting $names makes more than "
                          f"{MAX_SUBSTITUTED_TOTAL} characters in the whole scene")
 
     def _value_of(self, match: re.Match, element: Element) -> str:
         name = match.group(1)
         if name not in self.defaults:
-            element.fail(f"undefined parameter ${name} (define it with <default name=\"{name}\" value=...> "
+            element.fail(f"undefined parameter ${shown(name)} (define it with <default name=... value=...> "
                          "before its first use)")
         return self.defaults[name]
 
@@ -310,7 +310,7 @@ class _Expansion:
             unexpected = sorted(set(child.attrs) - allowed)
             known = child.tag in OBJECT_TAGS or child.tag in PROPERTY_TAGS or child.tag in _ATTRIBUTES
             if unexpected and known:
-                child.fail(f"unexpected attribute '{unexpected[0]}'")
+                child.fail(f"unexpected attribute '{shown(unexpected[0])}'")
             if child.tag == "default":
                 self._no_children(child)
                 self.defaults.setdefault(child.attr("name"), child.attr("value"))
@@ -342,7 +342,7 @@ class _Expansion:
         path = Path(name) if Path(name).is_absolute() else folder / name
         real = os.path.realpath(path)
         if real in chain:
-            include.fail(f"include cycle: {path} includes itself (through {len(chain)} file(s))")
+            include.fail(f"include cycle: {shown(str(path))} includes itself (through {len(chain)} file(s))")
         if len(chain) > MAX_INCLUDE_DEPTH:  # chain: this file and the files including it
             include.fail(f"more than {MAX_INCLUDE_DEPTH} includes nested in one another")
         self.files += 1
@@ -351,10 +351,10 @@ class _Expansion:
         try:
             found = path.is_file()
         except (OSError, ValueError) as exc:  # a name too long for the file system, a NUL byte
-            include.fail(f"cannot look up the included file {str(path)[:80]}...: "
+            include.fail(f"cannot look up the included file '{shown(str(path))}': "
                          f"{getattr(exc, 'strerror', None) or exc}")
         if not found:
-            include.fail(f"included file not found (or not a regular file): {path}")
+            include.fail(f"included file not found (or not a regular file): {shown(str(path))}")
         root = _parse_file(str(path), str(path))
         if root.tag != "scene":
             root.fail("an included file's root element is <scene>")
@@ -376,14 +376,14 @@ def _collect_ids(root: Element, aliases: list[Element]) -> dict[str, Element]:
             if ident is None:
                 continue
             if ident in ids:
-                element.fail(f"duplicate id '{ident}' (first at {ids[ident].where})")
+                element.fail(f"duplicate id '{shown(ident)}' (first at {ids[ident].where})")
             ids[ident] = element
     for alias in aliases:
         source, name = alias.attrs["id"], alias.attrs["as"]
         if source not in ids:
-            alias.fail(f"no object has id '{source}'")
+            alias.fail(f"no object has id '{shown(source)}'")
         if name in ids:
-            alias.fail(f"id '{name}' is taken (at {ids[name].where})")
+            alias.fail(f"id '{shown(name)}' is taken (at {ids[name].where})")
         ids[name] = ids[source]
     return ids
 
@@ -396,19 +396,19 @@ def number(element: Element, text: str, what: str) -> float:
     """A finite number written as Mitsuba accepts it (surrounding spaces allowed)."""
     token = text.strip()
     if _NOT_FINITE.fullmatch(token):
-        element.fail(f"{what}: expected a finite number, got '{token}'")
+        element.fail(f"{what}: expected a finite number, got '{shown(token)}'")
     if not _NUMBER.fullmatch(token):
-        element.fail(f"{what}: expected a number, got '{_short(token)}'")
+        element.fail(f"{what}: expected a number, got '{shown(token)}'")
     value = float(token)
     if not math.isfinite(value):
-        element.fail(f"{what}: '{_short(token)}' is not a finite number")
+        element.fail(f"{what}: '{shown(token)}' is not a finite number")
     return value
 
 
 def integer(element: Element, text: str, what: str) -> int:
     token = text.strip()
     if not _INTEGER.fullmatch(token) or len(token) > 30:
-        element.fail(f"{what}: expected a whole number, got '{_short(token)}'")
+        element.fail(f"{what}: expected a whole number, got '{shown(token)}'")
     return int(token)
 
 
@@ -420,7 +420,7 @@ def numbers(element: Element, text: str, what: str) -> list[float]:
 def boolean(element: Element, text: str, what: str) -> bool:
     token = text.strip().lower()
     if token not in ("true", "false"):
-        element.fail(f"{what}: expected true or false, got '{_short(text)}'")
+        element.fail(f"{what}: expected true or false, got '{shown(text)}'")
     return token == "true"
 
 
@@ -538,6 +538,3 @@ def _vector_attr(op: Element, name: str) -> np.ndarray:
         op.fail(f"{name}: expected 3 numbers, got {len(values)}")
     return np.array(values, dtype=np.float64)
 
-
-def _short(text: str) -> str:
-    return text if len(text) <= 40 else text[:37] + "..."

@@ -25,7 +25,7 @@ import numpy as np
 
 from .. import materials
 from ..camera import Camera
-from ..errors import one_line
+from ..errors import one_line, shown
 from ..record import MAX_SAMPLE_INDEX
 from . import spectrum
 from .mesh import MeshError, angle_weighted_normals, read_mesh_file
@@ -97,8 +97,8 @@ class _Plugin:
             if child.tag in PROPERTY_TAGS:
                 name = child.attr("name")
                 if name in self.props:
-                    child.fail(f"property '{name}' is given twice (first at line {self.props[name].line})",
-                               element)
+                    child.fail(f"property '{shown(name)}' is given twice (first at line "
+                               f"{self.props[name].line})", element)
                 self.props[name] = child
             elif child.tag == "ref":
                 self.objects.append((document.resolve(child), child))
@@ -198,7 +198,7 @@ class _Plugin:
         for token in pairs:
             parts = token.split(":")
             if len(parts) != 2:
-                element.fail(f"{name}: expected wavelength:value pairs, got '{token[:40]}'", self.element)
+                element.fail(f"{name}: expected wavelength:value pairs, got '{shown(token)}'", self.element)
             wavelengths.append(number(element, parts[0], name))
             values.append(number(element, parts[1], name))
         if len(wavelengths) < 2:
@@ -208,9 +208,9 @@ class _Plugin:
         rgb = spectrum.tabulated_rgb(np.array(wavelengths), np.array(values), emitter=kind == "emitter")
         clamped = np.clip(rgb, 0.0, 1.0 if kind == "reflectance" else None)
         if not np.array_equal(clamped, rgb):
-            shown = ", ".join(f"{c:.4g}" for c in rgb)
-            self.notes.append(f"{element.where}: {name}'s spectrum is ({shown}) in sRGB, clamped into range "
-                              "as Mitsuba clamps it")
+            channels = ", ".join(f"{c:.4g}" for c in rgb)
+            self.notes.append(f"{element.where}: {name}'s spectrum is ({channels}) in sRGB, clamped into "
+                              "range as Mitsuba clamps it")
         return clamped
 
     def transform(self, name: str = "to_world") -> np.ndarray | None:
@@ -226,11 +226,12 @@ class _Plugin:
     def done(self) -> None:
         for name, element in self.props.items():
             if name not in self.used:
-                element.fail(f"{self.type} has no property '{name}' that tracer reads", self.element)
+                element.fail(f"{shown(self.type)} has no property '{shown(name)}' that tracer reads",
+                             self.element)
         for obj, written in self.objects:
             if id(written) not in self.taken:
                 written.fail(f"a <{obj.tag}> is not expected inside <{self.element.tag} "
-                             f"type=\"{self.type}\">", self.element)
+                             f"type=\"{shown(self.type)}\">", self.element)
 
 
 class _SceneReader:
@@ -301,7 +302,7 @@ class _SceneReader:
         if p.type != "perspective":
             hint = {"thinlens": " (depth of field: use a perspective sensor)",
                     "orthographic": " (tracer's camera is a pinhole)"}.get(p.type, "")
-            p.fail(f"sensor '{p.type}' is not supported{hint}; tracer reads perspective")
+            p.fail(f"sensor '{shown(p.type)}' is not supported{hint}; tracer reads perspective")
         width, height = FILM_SIZE
         films = p.nested("film")
         if len(films) > 1:
@@ -365,8 +366,8 @@ class _SceneReader:
             p.props["fov"].fail("fov: expected a number < 180", p.element)
         axis = (p.string("fov_axis", "x") or "x").lower()
         if axis not in ("x", "y", "diagonal", "smaller", "larger"):
-            p.props["fov_axis"].fail(f"fov_axis: expected x, y, diagonal, smaller or larger; got '{axis}'",
-                                     p.element)
+            p.props["fov_axis"].fail(f"fov_axis: expected x, y, diagonal, smaller or larger; got "
+                                     f"'{shown(axis)}'", p.element)
         if axis == "smaller":
             axis = "x" if w < h else "y"
         elif axis == "larger":
@@ -377,7 +378,7 @@ class _SceneReader:
     def film(self, element: Element, written: Element) -> tuple[int, int]:
         p = self.plugin(element)
         if p.type != "hdrfilm":
-            p.fail(f"film '{p.type}' is not supported; tracer reads hdrfilm (and writes its own EXR)")
+            p.fail(f"film '{shown(p.type)}' is not supported; tracer reads hdrfilm (and writes its own EXR)")
         width = p.integer("width", FILM_SIZE[0], 1, MAX_SIDE)
         height = p.integer("height", FILM_SIZE[1], 1, MAX_SIDE)
         crop = {name: p.integer(name, default, 0, MAX_SIDE) for name, default in
@@ -387,7 +388,7 @@ class _SceneReader:
         for name in ("pixel_format", "component_format", "file_format"):
             value = p.string(name, None)
             if value is not None:
-                self.notes.append(f"film {name} \"{value}\"")
+                self.notes.append(f"film {name} \"{shown(value)}\"")
         for name in ("sample_border", "compensate"):
             if p.boolean(name, False):
                 self.notes.append(f"film {name}")
@@ -397,7 +398,7 @@ class _SceneReader:
             f.used.update(f.props)  # its parameters shape the filter tracer does not use
             f.done()
             if f.type != "box":
-                self.notes.append(f"<rfilter type=\"{f.type}\">")
+                self.notes.append(f"<rfilter type=\"{shown(f.type)}\">")
         p.done()
         return width, height
 
@@ -406,7 +407,7 @@ class _SceneReader:
         if p.has("sample_count"):
             self.render["spp"] = p.integer("sample_count", 4, 1, MAX_SAMPLE_INDEX)
         if p.type != "independent":
-            self.notes.append(f"<sampler type=\"{p.type}\"> (tracer uses its --sampler)")
+            self.notes.append(f"<sampler type=\"{shown(p.type)}\"> (tracer uses its --sampler)")
         if p.has("seed"):
             seed = p.integer("seed", 0, -(2**63), 2**64)
             self.notes.append(f"sampler seed {seed} (tracer uses its --seed)")
@@ -417,7 +418,7 @@ class _SceneReader:
         p = self.plugin(element)
         p.used.update(p.props)
         p.taken.update(id(written) for _, written in p.objects)
-        self.notes.append(f"<integrator type=\"{p.type}\">")
+        self.notes.append(f"<integrator type=\"{shown(p.type)}\">")
 
     # -- shapes ----------------------------------------------------------------------------
 
@@ -427,8 +428,8 @@ class _SceneReader:
         if kind not in ("obj", "ply", "rectangle", "cube", "sphere", "disk"):
             hints = {"serialized": " (convert it to PLY, e.g. with Mitsuba's Python API)",
                      "instance": " (instancing)", "shapegroup": " (instancing)"}
-            p.fail(f"shape '{kind}' is not supported{hints.get(kind, '')}; tracer reads obj, ply, rectangle, "
-                   "cube, sphere and disk")
+            p.fail(f"shape '{shown(kind)}' is not supported{hints.get(kind, '')}; tracer reads obj, ply, "
+                   "rectangle, cube, sphere and disk")
         matrix = p.transform()
         matrix = np.eye(4) if matrix is None else matrix
         if np.max(np.abs(matrix)) > MAX_COORDINATE:
@@ -539,8 +540,8 @@ class _SceneReader:
         if emitters:
             emitter, written = emitters[0]
             if emitter.attrs.get("type") != "area":
-                written.fail(f"emitter '{emitter.attrs.get('type', '')}' inside a shape: a shape's emitter "
-                             "is 'area'", p.element)
+                written.fail(f"emitter '{shown(emitter.attrs.get('type', ''))}' inside a shape: a shape's "
+                             "emitter is 'area'", p.element)
             owner = self.emitter_owner.setdefault(id(emitter), p.element)
             if owner is not p.element:
                 written.fail(f"this area emitter already belongs to the shape at {owner.where} (an emitter "
@@ -570,7 +571,8 @@ class _SceneReader:
             why = {"envmap": "environment lights", "constant": "environment lights",
                    "directional": "directional lights", "spot": "spot lights",
                    "projector": "projector lights"}.get(p.type)
-            p.fail(f"emitter '{p.type}' is not supported" + (f" ({why} are not in tracer)" if why else "")
+            p.fail(f"emitter '{shown(p.type)}' is not supported"
+                   + (f" ({why} are not in tracer)" if why else "")
                    + "; tracer reads point emitters and area emitters on shapes")
         intensity = p.color("intensity", 1.0, "emitter", hi=MAX_RADIANCE)
         position = p.point("position", None)
@@ -655,7 +657,7 @@ class _SceneReader:
             if kind == "roughplastic":
                 values.update(self.roughness(p))
         else:
-            p.fail(f"bsdf '{kind}' is not supported; tracer reads diffuse, conductor, roughconductor, "
+            p.fail(f"bsdf '{shown(kind)}' is not supported; tracer reads diffuse, conductor, roughconductor, "
                    "plastic, roughplastic and twosided")
         p.done()
         return kind, values
@@ -671,10 +673,11 @@ class _SceneReader:
         from ..materials.presets import CONDUCTORS
 
         if name not in CONDUCTORS:
-            close = [n for n in CONDUCTORS if n.lower() == name.lower()]
+            folded = name.lower()  # once: a 60 MB name folded for every preset took seconds
+            close = [n for n in CONDUCTORS if n.lower() == folded]
             hint = f" (names are case-sensitive: '{close[0]}')" if close else ""
-            p.props["material"].fail(f"unknown conductor material '{name}'{hint}; Mitsuba's names: none, "
-                                     f"{', '.join(sorted(CONDUCTORS, key=str.lower))}", p.element)
+            p.props["material"].fail(f"unknown conductor material '{shown(name)}'{hint}; Mitsuba's names: "
+                                     f"none, {', '.join(sorted(CONDUCTORS, key=str.lower))}", p.element)
         eta, k = CONDUCTORS[name]
         return np.array(eta, dtype=np.float64), np.array(k, dtype=np.float64)
 
@@ -689,7 +692,8 @@ class _SceneReader:
         if element.tag == "string":
             key = text.strip().lower()
             if key not in IORS:
-                element.fail(f"unknown IOR name '{text}' (Mitsuba's names: {', '.join(IORS)})", p.element)
+                element.fail(f"unknown IOR name '{shown(text)}' (Mitsuba's names: {', '.join(IORS)})",
+                             p.element)
             return IORS[key]
         value = number(element, text, name)
         p._check(element, value, 0.0, 100.0, lo_open=True)
@@ -700,8 +704,8 @@ class _SceneReader:
         least MIN_ALPHA as Mitsuba's distributions clamp it."""
         distribution = (p.string("distribution", "beckmann") or "").lower()
         if distribution not in ("beckmann", "ggx"):
-            p.props["distribution"].fail(f"distribution: expected beckmann or ggx, got '{distribution}'",
-                                         p.element)
+            p.props["distribution"].fail("distribution: expected beckmann or ggx, got "
+                                         f"'{shown(distribution)}'", p.element)
         if p.has("alpha_u") or p.has("alpha_v"):
             if p.has("alpha"):
                 p.fail("give alpha or alpha_u and alpha_v, not both")
