@@ -357,6 +357,22 @@ def test_sensor_refusals(tmp_path, sensor, words):
     refused(tmp_path, sensor, *words, line=3, sensor=False)
 
 
+def test_focus_distance_and_banner_are_read_and_ignored(tmp_path):
+    """Mitsuba 3.9.1 reads a perspective sensor's focus_distance (every projective camera has
+    one; a pinhole's image does not depend on it) and an hdrfilm's banner (of any type: it marks
+    it read and writes none), so both load without a note; aperture_radius is the thin lens's,
+    which Mitsuba's perspective sensor leaves unread, and refuses."""
+    notes = []
+    path = write(tmp_path, '<sensor type="perspective"><float name="focus_distance" value="1000"/>'
+                           '<film type="hdrfilm"><boolean name="banner" value="false"/>'
+                           '<integer name="width" value="8"/><integer name="height" value="6"/></film>'
+                           '</sensor>', sensor=False)
+    scene = load_scene(path, notify=notes.append)
+    assert (scene.camera.width, scene.camera.height) == (8, 6) and notes == []
+    refused(tmp_path, '<sensor type="perspective"><float name="aperture_radius" value="0.1"/></sensor>',
+            "no property 'aperture_radius'", line=3, sensor=False)
+
+
 def test_no_sensor_is_refused(tmp_path):
     refused(tmp_path, '<shape type="cube"/>', "no <sensor>", sensor=False)
 

@@ -320,6 +320,10 @@ class _SceneReader:
                 self.notes.append(f"{name} {value:g}")
         for name in ("shutter_open", "shutter_close"):  # no motion in a tracer scene: no effect
             p.float(name, 0.0, lo=0.0)
+        # Mitsuba's projective cameras read the focal distance (ProjectiveCamera in
+        # src/render/sensor.cpp); a pinhole's image does not depend on it. (aperture_radius is
+        # the thin lens's: Mitsuba refuses it here too, as an unread property.)
+        p.float("focus_distance", 0.0)
         for name in ("principal_point_offset_x", "principal_point_offset_y"):
             if p.float(name, 0.0) != 0.0:
                 p.props[name].fail("an off-centre principal point is not supported", element)
@@ -392,6 +396,7 @@ class _SceneReader:
         for name in ("sample_border", "compensate"):
             if p.boolean(name, False):
                 self.notes.append(f"film {name}")
+        p.used.add("banner")  # Mitsuba 3 reads it, of any type, and writes no banner (hdrfilm.cpp)
         filters = p.nested("rfilter")
         for rfilter, _ in filters:
             f = self.plugin(rfilter)
