@@ -765,12 +765,28 @@ def test_bsdf_refusals(tmp_path, bsdf, words):
     refused(tmp_path, f'<shape type="cube">\n{bsdf}</shape>', *words, line=4)
 
 
-def test_unused_declarations_are_still_checked(tmp_path):
-    refused(tmp_path, '<bsdf type="dielectric" id="glass"/>', "dielectric", line=3)
-    refused(tmp_path, '<texture type="checkerboard" id="t"/>', "textures", line=3)
-    refused(tmp_path, '<emitter type="area" id="e"><rgb name="radiance" value="-1"/></emitter>', ">= 0",
-            line=3)
-    assert len(load(tmp_path, '<bsdf type="diffuse" id="unused"/>').materials.names) == 1
+def test_unused_declarations_are_checked_as_mitsuba_checks_them(tmp_path):
+    """A declaration no shape uses changes no image: it is refused only where Mitsuba refuses
+    it. A twosided (one BSDF, or two: Mitsuba's twosided takes two), a dielectric or another of
+    Mitsuba's BSDFs that tracer does not render load; values out of range, an unknown type, a
+    dielectric inside a twosided (Mitsuba nests only BSDFs without transmission), a twosided
+    without a BSDF and an area emitter's negative radiance are refused. (Textures are refused
+    wherever they are.)"""
+    for body in ('<bsdf type="twosided" id="both"><bsdf type="diffuse"/></bsdf>',
+                 '<bsdf type="twosided" id="two"><bsdf type="diffuse"/><bsdf type="conductor"/></bsdf>',
+                 '<bsdf type="dielectric" id="glass"/>', '<bsdf type="principled" id="p"/>',
+                 '<bsdf type="diffuse" id="d"/><bsdf type="twosided" id="t"><ref id="d"/></bsdf>'):
+        assert len(load(tmp_path, body).materials.names) == 1, body  # the black row only
+    for body, words in [
+            ('<bsdf type="twosided" id="t">\n<bsdf type="diffuse"><float name="reflectance" value="2"/>'
+             '</bsdf></bsdf>', ["<= 1"]),
+            ('<bsdf type="difuse" id="typo"/>', ["bsdf 'difuse' is not supported"]),
+            ('<bsdf type="twosided" id="t">\n<bsdf type="dielectric"/></bsdf>',
+             ["dielectric inside a twosided"]),
+            ('<bsdf type="twosided" id="t"/>', ["twosided needs one or two nested BSDFs"]),
+            ('<texture type="checkerboard" id="t"/>', ["textures"]),
+            ('<emitter type="area" id="e"><rgb name="radiance" value="-1"/></emitter>', [">= 0"])]:
+        refused(tmp_path, body, *words)
 
 
 def test_sample_visible_false_is_told(tmp_path):

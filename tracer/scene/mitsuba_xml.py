@@ -57,6 +57,13 @@ DISK_SEGMENTS = 288
 RIGID_TOLERANCE = 1e-5
 
 _REFLECTANCES = ("reflectance", "diffuse_reflectance", "specular_reflectance")
+_READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided"})
+_DIELECTRICS = frozenset({"dielectric", "roughdielectric", "thindielectric"})
+# Mitsuba 3.9.1's BSDF plugins (src/bsdfs/*.cpp): an unused declaration of one that tracer does
+# not read is accepted unread (it changes no image); any other type is unknown to Mitsuba too.
+_MITSUBA_BSDFS = _READ_BSDFS | _DIELECTRICS | frozenset({
+    "blendbsdf", "bumpmap", "circular", "hair", "mask", "measured", "measured_polarized", "normalmap",
+    "null", "polarizer", "pplastic", "principled", "principledthin", "retarder"})
 _UNSUPPORTED_ANYWHERE = {
     "texture": "textures are not supported (tracer reads constant colours: give an <rgb>, <float> or "
                "<spectrum>)",
@@ -282,9 +289,10 @@ class _SceneReader:
             else:
                 child.fail("not expected directly inside <scene>")
         # Declarations nothing refers to are still checked, as Mitsuba builds them too.
+        used = {key[0] for key in self.rows}
         for element in declared_bsdfs:
-            if not any(key[0] == id(element) for key in self.rows):
-                _ = self.bsdf_triple(self.plugin(element))
+            if id(element) not in used:
+                self.unused_bsdf(element)
         for element in declared_emitters:
             if id(element) not in self.emitter_owner:
                 self.area_radiance(element)
@@ -601,6 +609,25 @@ class _SceneReader:
                                                  False)
         return self.default_row
 
+    def unused_bsdf(self, bsdf: Element) -> None:
+        """Check a BSDF no shape uses, as Mitsuba checks it when it builds it: one that tracer
+        reads is read (its values must be what Mitsuba takes), a twosided's one or two nested
+        BSDFs each so (Mitsuba's twosided refuses a dielectric inside, src/bsdfs/twosided.cpp);
+        another of Mitsuba's BSDFs is accepted unread, an unknown type refused."""
+        p = self.plugin(bsdf)
+        if p.type == "twosided":
+            nested = p.nested("bsdf")
+            if not nested or len(nested) > 2:
+                p.fail(f"twosided needs one or two nested BSDFs, not {len(nested)}")
+            for inner, written in nested:
+                if inner.attrs.get("type") in _DIELECTRICS:
+                    written.fail("a dielectric inside a twosided (Mitsuba nests only BSDFs without "
+                                 "transmission)", bsdf)
+                self.unused_bsdf(inner)
+            p.done()
+        elif p.type in _READ_BSDFS or p.type not in _MITSUBA_BSDFS:
+            self.bsdf_triple(p)
+
     def material(self, bsdf: Element, written: Element) -> int:
         twosided = bsdf.attrs.get("type") == "twosided"
         key = (id(bsdf), twosided)
@@ -641,10 +668,8 @@ class _SceneReader:
     def bsdf_triple(self, p: _Plugin) -> tuple[str, dict[str, object]]:
         """tracer's material type and parameters for the Mitsuba BSDF ``p`` (not twosided)."""
         kind = p.type
-        if kind in ("dielectric", "roughdielectric", "thindielectric"):
+        if kind in _DIELECTRICS:
             p.fail(_DIELECTRIC.format(kind=kind))
-        if kind == "twosided":
-            p.fail("a twosided here is not supported (only as a shape's bsdf)")
         if kind == "diffuse":
             values: dict[str, object] = {"reflectance": p.color("reflectance", 0.5, "reflectance", hi=1.0)}
         elif kind in ("conductor", "roughconductor"):
