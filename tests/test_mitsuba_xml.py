@@ -373,6 +373,46 @@ def test_focus_distance_and_banner_are_read_and_ignored(tmp_path):
             "no property 'aperture_radius'", line=3, sensor=False)
 
 
+def test_camera_matrices_rigid_to_printed_precision_are_mitsubas(tmp_path):
+    """A look-at written as a 16-number matrix to 6 or 5 significant digits (an entry of
+    M M^T - I about 1e-6 or 1.3e-5; the survey of public scenes found such cameras refused)
+    loads, and its rays are Mitsuba's (M times the camera-space direction) to within that; a
+    scale is refused where Mitsuba refuses it (an entry of M M^T - I beyond 1e-3:
+    Transform::has_scale, in the perspective sensor's constructor), and not before."""
+    origin, target = np.array([278.0, 273.0, -800.0]), np.array([268.0, 263.0, -799.0])
+    forward = (target - origin) / np.linalg.norm(target - origin)
+    left = np.cross([0.0, 1.0, 0.0], forward)
+    left /= np.linalg.norm(left)
+    exact = np.eye(4)
+    exact[:3, :3] = np.stack([left, np.cross(forward, left), forward], axis=1)
+    exact[:3, 3] = origin
+
+    def sensor(matrix: np.ndarray, digits: int) -> str:
+        value = " ".join(f"{v:.{digits}g}" for v in matrix.ravel())
+        return (f'<sensor type="perspective"><float name="fov" value="40"/><transform name="to_world">'
+                f'<matrix value="{value}"/></transform></sensor>')
+
+    for digits, deviation in [(6, 1e-6), (5, 1e-5)]:
+        written = np.array([float(f"{v:.{digits}g}") for v in exact.ravel()]).reshape(4, 4)
+        assert np.max(np.abs(written[:3, :3] @ written[:3, :3].T - np.eye(3))) > deviation
+        camera = load_scene(write(tmp_path, sensor(written, digits), sensor=False)).camera
+        f, r, u = camera.basis
+        tan_half, aspect = math.tan(math.radians(camera.fov) / 2), camera.width / camera.height
+        for sx, sy in [(0.0, 0.0), (1.0, 1.0), (-1.0, 0.5)]:  # film positions, -1 to 1 across
+            local = np.array([-sx * tan_half * aspect, sy * tan_half, 1.0])  # Mitsuba's +x: the left
+            mitsuba = written[:3, :3] @ (local / np.linalg.norm(local))
+            ours = f + sx * tan_half * aspect * r + sy * tan_half * u
+            np.testing.assert_allclose(ours / np.linalg.norm(ours), mitsuba / np.linalg.norm(mitsuba),
+                                       atol=3 * deviation)
+    for scale, kept in [(1.0004, True), (1.0006, False)]:  # M M^T - I: 8e-4 and 1.2e-3 on the diagonal
+        scaled = exact.copy()
+        scaled[:3, :3] *= scale
+        if kept:
+            load_scene(write(tmp_path, sensor(scaled, 9), sensor=False))
+        else:
+            refused(tmp_path, sensor(scaled, 9), "scales or shears", line=3, sensor=False)
+
+
 def test_no_sensor_is_refused(tmp_path):
     refused(tmp_path, '<shape type="cube"/>', "no <sensor>", sensor=False)
 
