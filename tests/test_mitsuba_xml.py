@@ -985,7 +985,6 @@ def test_include_cycles_depth_and_roots(tmp_path):
         load_scene(DATA / "cycle_a.xml")
     (tmp_path / "part.xml").write_text('<bsdf type="diffuse"/>')
     refused(tmp_path, '<include filename="part.xml"/>', "root element is <scene>")
-    refused(tmp_path, '<include filename="nothere.xml"/>', "included file not found", line=3)
 
 
 @pytest.mark.parametrize("nested", [document.MAX_INCLUDE_DEPTH, document.MAX_INCLUDE_DEPTH + 1])
@@ -1003,6 +1002,51 @@ def test_include_depth_limit_says_what_it_does(tmp_path, nested):
             load_scene(tmp_path / "d0.xml")
         message = str(caught.value)
         assert f"d{nested - 1}.xml:1: <include>: more than 16 includes nested in one another" in message
+
+
+def test_files_are_found_as_mitsubas_file_resolver_finds_them(tmp_path):
+    """Mitsuba 3.9.1 (src/core/parser.cpp, src/core/fresolver.cpp): an include is looked for
+    beside the including file, then where that file's own names are looked for (its <path>
+    folders, the including file's folder, ..., the main file's <path> folders, the main
+    scene's folder); a mesh in the main file's <path> folders and then the main scene's folder,
+    not beside the file that names it. A <path> of an included file serves its includes only.
+    As mitsuba-data's scenes/cbox/cbox-rgb.xml does: fragments name meshes and each other
+    relative to the main scene."""
+    (tmp_path / "fragments" / "parts").mkdir(parents=True)
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "fragments" / "parts" / "tri_in_parts.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+
+    def scene_file(path: Path, body: str) -> None:
+        path.write_text(f'<scene version="3.0.0">{body}</scene>')
+
+    scene_file(tmp_path / "main.xml", f'{SENSOR}<path value="lib"/><include filename="fragments/a.xml"/>'
+                                      '<include filename="from_lib.xml"/>')
+    scene_file(tmp_path / "lib" / "from_lib.xml", '<bsdf type="diffuse" id="lib"/>')
+    # a.xml: b.xml is the main scene's fragments/b.xml, c.xml is beside a.xml, e.xml in its <path>
+    scene_file(tmp_path / "fragments" / "a.xml",
+               '<include filename="fragments/b.xml"/><include filename="c.xml"/><path value="parts"/>'
+               '<include filename="e.xml"/><shape type="obj"><string name="filename" value="meshes/tri.obj"/>'
+               '<ref id="lib"/></shape>')
+    scene_file(tmp_path / "fragments" / "b.xml", '<bsdf type="diffuse" id="b"/>')
+    scene_file(tmp_path / "fragments" / "c.xml", '<bsdf type="diffuse" id="c"/>')
+    scene_file(tmp_path / "c.xml", '<bsdf type="conductor" id="not_this_c"/>')  # beside a.xml comes first
+    scene_file(tmp_path / "fragments" / "parts" / "e.xml", '<bsdf type="diffuse" id="e"/>')
+    assert set(document.read_document(str(tmp_path / "main.xml")).ids) == {"lib", "b", "c", "e"}
+    scene = load_scene(tmp_path / "main.xml")
+    assert scene.shapes[0].record["file"] == str(tmp_path / "meshes" / "tri.obj")
+    assert scene.materials.names[scene.shapes[0].material] == "lib"
+    # a <path> in an included file does not reach the meshes (Mitsuba builds them after parsing)
+    scene_file(tmp_path / "fragments" / "e.xml", '<shape type="obj"><string name="filename" '
+                                                 'value="tri_in_parts.obj"/></shape>')
+    scene_file(tmp_path / "fragments" / "parts" / "e.xml", '<include filename="../e.xml"/>')
+    with pytest.raises(InputError, match="mesh file not found"):
+        load_scene(tmp_path / "main.xml")
+    refused(tmp_path, '<path value="nowhere"/>', "folder not found: 'nowhere'", line=3)
+    refused(tmp_path, '<shape type="cube"><path value="."/></shape>', "directly inside <scene>", line=3)
+    message = refused(tmp_path, '<include filename="nothere.xml"/>', "included file not found", line=3)
+    assert f"looked in {tmp_path}" in message
 
 
 def test_ids_refs_and_aliases(tmp_path):

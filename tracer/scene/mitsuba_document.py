@@ -9,11 +9,14 @@ Mitsuba 3.9.1's, checked by loading small scenes with it (``tests/test_mitsuba_x
 - ``<default name value>`` defines ``$name`` for the attributes that FOLLOW it in document
   order (a use before it is an error), unless ``name`` is already defined (the first wins); a
   default's own value is substituted when it is read; an undefined ``$name`` is an error.
-- ``<include filename>`` is relative to the including file's folder; the included file's
-  root is a ``<scene>`` whose children take the include's place. Cycles and more than
-  MAX_INCLUDE_DEPTH nested includes are refused.
-- ``<path value>`` adds a folder (relative to the file that names it) searched for relative
-  file names, before the scene file's folder; the latest ``<path>`` is searched first.
+- relative file names are looked up as Mitsuba's file resolver looks them up (:class:`_Scope`):
+  an ``<include filename>`` in the including file's folder, then in the folders searched for
+  that file's own names; a mesh file in the main file's ``<path>`` folders, then the main
+  scene's folder. The included file's root is a ``<scene>`` whose children take the include's
+  place. Cycles and more than MAX_INCLUDE_DEPTH nested includes are refused.
+- ``<path value>`` (in a file's ``<scene>``, not inside an object) puts a folder (relative to
+  that file's folder, else looked up as an include is) before the others; the latest first. In
+  an included file it serves only that file's includes, as in Mitsuba.
 - every object (``bsdf``, ``shape``, ...) may have an ``id``, unique in the scene;
   ``<ref id>`` stands for it anywhere an object may appear (its ``name`` is ignored, as
   Mitsuba ignores it); ``<alias id as>`` gives it a second id.
@@ -39,7 +42,7 @@ from xml.parsers import expat
 
 import numpy as np
 
-from ..errors import InputError, shown
+from ..errors import SHOWN_CHARACTERS, InputError, shown
 
 MAX_FILE_BYTES = 64 << 20  # far beyond any scene file (meshes live in their own files)
 # Includes inside includes: the main file may include a file that includes another, and so on,
@@ -126,8 +129,9 @@ class Document:
     """A scene file with its includes spliced in and its ids resolved.
 
     root : the ``<scene>`` element (``<default>``, ``<include>``, ``<path>`` and ``<alias>``
-        removed).   ids : id (and alias) -> object element.   search_folders : ``<path>``
-        folders, the latest first.   folder : the scene file's folder.
+        removed).   ids : id (and alias) -> object element.   search_folders : the main file's
+        ``<path>`` folders, the latest first.   folder : the scene's folder (the main file's,
+        unless the reader was given another).
     """
 
     path: str
@@ -143,21 +147,18 @@ class Document:
             ref.fail(f"no object has id '{shown(ref.attrs['id'])}'")
         return target
 
-    def find_file(self, name: str, near: Element) -> Path:
-        """A file named in the scene: absolute as is; relative, in the ``<path>`` folders (the
-        latest first), the scene file's folder, then the folder of the file that names it."""
-        given = Path(name)
-        if given.is_absolute():
-            return given
-        folders = [*self.search_folders, self.folder, Path(near.file).parent]
-        for folder in folders:
-            candidate = folder / given
-            try:
-                if candidate.is_file():
-                    return candidate
-            except OSError:
-                continue
-        return self.folder / given  # missing: the reader names it in its message
+    def find_file(self, name: str) -> Path:
+        """A file the scene names (a mesh): absolute as is; relative, the first that exists of
+        the main file's ``<path>`` folders (the latest first) and the scene's folder, as
+        Mitsuba's file resolver finds it when it builds the shapes (``Mesh::Mesh`` in
+        src/render/mesh.cpp: ``file_resolver()->resolve(filename)``, after parsing, when only
+        the main file's ``<path>`` folders are left in it). Mitsuba also looks in the folder it
+        was started from; tracer does not (a scene would then depend on where it is rendered)."""
+        try:
+            found = _first_found(Path(name), [*self.search_folders, self.folder])
+        except (OSError, ValueError):
+            found = None
+        return found if found is not None else self.folder / name  # missing: the reader says so
 
 
 def read_document(path: str, base: Path | None = None) -> Document:
@@ -167,11 +168,12 @@ def read_document(path: str, base: Path | None = None) -> Document:
     if root.tag != "scene":
         root.fail("the root element of a Mitsuba scene is <scene>")
     _check_version(root)
-    state = _Expansion(top=Path(path))
-    root.children = state.expand(root, Path(path).parent, [os.path.realpath(path)], 1)
+    state = _Expansion()
+    main = _Scope(Path(path).parent, [], [os.path.realpath(path)], Path(path).parent)
+    root.children = state.expand(root, main, 1)
     ids = _collect_ids(root, state.aliases)
     folder = base if base is not None else Path(path).parent
-    return Document(path, root, ids, state.search_folders, folder)
+    return Document(path, root, ids, main.resolver, folder)
 
 
 def _check_version(scene: Element) -> None:
@@ -251,16 +253,43 @@ def _read_at_most(fh, limit: int) -> bytes:
     return b"".join(chunks)
 
 
+@dataclass
+class _Scope:
+    """One file as it is expanded, with what Mitsuba's file resolver holds while it is read
+    (src/core/parser.cpp, ``parse_xml_node``: an ``<include>`` is looked up in a copy of the
+    resolver with the including file's folder put first, and the included file is read with
+    that copy; a ``<path>`` puts its folder first in the resolver of the file it is in).
+
+    folder : the file's folder.   resolver : the folders searched after it: its own ``<path>``
+        folders, the latest first, then the folders of the file that includes it as they were
+        at the include, and so on up to the main file's ``<path>`` folders.   chain : the real
+        paths of the files including it and its own, the main file first.   top : the main
+        scene's folder, searched last.
+    """
+
+    folder: Path
+    resolver: list[Path]
+    chain: list[str]
+    top: Path
+
+    def include_folders(self) -> list[Path]:
+        """Where a relative ``<include>`` of this file is looked for, in order."""
+        return list(dict.fromkeys([self.folder, *self.resolver, self.top]))
+
+    def included(self, path: Path) -> "_Scope":
+        """The scope of the file ``path`` that this file includes."""
+        return _Scope(path.parent, [self.folder, *self.resolver], [*self.chain, os.path.realpath(path)],
+                      self.top)
+
+
 class _Expansion:
     """Splices includes in, substitutes ``$name``, collects ``<path>`` folders and aliases."""
 
-    def __init__(self, top: Path):
+    def __init__(self):
         self.defaults: dict[str, str] = {}
-        self.search_folders: list[Path] = []
         self.aliases: list[Element] = []
         self.files = 1
         self.substituted = 0  # characters $name substitution has added, in all files
-        self.top = top
 
     def substitute(self, element: Element) -> None:
         """``$name`` replaced in each attribute of ``element``. The size is counted as the value
@@ -297,9 +326,9 @@ class _Expansion:
                          "before its first use)")
         return self.defaults[name]
 
-    def expand(self, parent: Element, folder: Path, chain: list[str], depth: int) -> list[Element]:
-        """``parent``'s children with includes spliced in and directives applied; ``folder``
-        is the folder of the file they are in, ``chain`` the files including it."""
+    def expand(self, parent: Element, scope: _Scope, depth: int) -> list[Element]:
+        """``parent``'s children with includes spliced in and directives applied; ``scope`` is
+        the file they are in."""
         out: list[Element] = []
         for child in parent.children:
             self.substitute(child)
@@ -316,7 +345,9 @@ class _Expansion:
                 self.defaults.setdefault(child.attr("name"), child.attr("value"))
             elif child.tag == "path":
                 self._no_children(child)
-                self.search_folders.insert(0, folder / child.attr("value"))
+                if parent.tag != "scene":  # Mitsuba: "<path>: path can only be child of root"
+                    child.fail("a <path> belongs directly inside <scene>")
+                scope.resolver.insert(0, self._path_folder(child, scope))
             elif child.tag == "alias":
                 self._no_children(child)
                 child.attr("id")
@@ -324,11 +355,11 @@ class _Expansion:
                 self.aliases.append(child)
             elif child.tag == "include":
                 self._no_children(child)
-                out.extend(self._include(child, folder, chain, depth))
+                out.extend(self._include(child, scope, depth))
             else:
-                if depth + len(chain) > MAX_NESTING:
+                if depth + len(scope.chain) > MAX_NESTING:
                     child.fail(f"elements nested more than {MAX_NESTING} deep (includes included)")
-                child.children = self.expand(child, folder, chain, depth + 1)
+                child.children = self.expand(child, scope, depth + 1)
                 out.append(child)
         return out
 
@@ -337,31 +368,65 @@ class _Expansion:
         if element.children:
             element.children[0].fail(f"<{element.tag}> takes no child elements")
 
-    def _include(self, include: Element, folder: Path, chain: list[str], depth: int) -> list[Element]:
+    @staticmethod
+    def _path_folder(path: Element, scope: _Scope) -> Path:
+        """The folder of a ``<path value>``: relative to its file's folder if it is there, else
+        looked up as that file's includes are (parser.cpp, ``TagType::Resource``); Mitsuba
+        refuses one that does not exist."""
+        value = path.attr("value")
+        try:
+            found = _first_found(Path(value), scope.include_folders(), Path.is_dir)
+        except (OSError, ValueError) as exc:  # a name too long for the file system, a NUL byte
+            path.fail(f"cannot look up the folder '{shown(value)}': {getattr(exc, 'strerror', None) or exc}")
+        if found is None:
+            path.fail(f"folder not found: '{shown(value)}'")
+        return found
+
+    def _include(self, include: Element, scope: _Scope, depth: int) -> list[Element]:
         name = include.attr("filename")
-        path = Path(name) if Path(name).is_absolute() else folder / name
-        real = os.path.realpath(path)
-        if real in chain:
-            include.fail(f"include cycle: {shown(str(path))} includes itself (through {len(chain)} file(s))")
-        if len(chain) > MAX_INCLUDE_DEPTH:  # chain: this file and the files including it
+        folders = scope.include_folders()
+        try:
+            path = _first_found(Path(name), folders)
+        except (OSError, ValueError) as exc:  # a name too long for the file system, a NUL byte
+            include.fail(f"cannot look up the included file '{shown(name)}': "
+                         f"{getattr(exc, 'strerror', None) or exc}")
+        if path is None:
+            looked = shown(", ".join(str(folder) for folder in folders), 4 * SHOWN_CHARACTERS)
+            include.fail(f"included file not found (or not a regular file): '{shown(name)}' "
+                         f"(looked in {looked})")
+        inner = scope.included(path)
+        if inner.chain[-1] in scope.chain:
+            include.fail(f"include cycle: {shown(str(path))} includes itself (through {len(scope.chain)} "
+                         "file(s))")
+        if len(scope.chain) > MAX_INCLUDE_DEPTH:  # chain: this file and the files including it
             include.fail(f"more than {MAX_INCLUDE_DEPTH} includes nested in one another")
         self.files += 1
         if self.files > MAX_FILES:
             include.fail(f"more than {MAX_FILES} files included")
-        try:
-            found = path.is_file()
-        except (OSError, ValueError) as exc:  # a name too long for the file system, a NUL byte
-            include.fail(f"cannot look up the included file '{shown(str(path))}': "
-                         f"{getattr(exc, 'strerror', None) or exc}")
-        if not found:
-            include.fail(f"included file not found (or not a regular file): {shown(str(path))}")
         root = _parse_file(str(path), str(path))
         if root.tag != "scene":
             root.fail("an included file's root element is <scene>")
         self.substitute(root)
         if "version" in root.attrs:
             _check_version(root)
-        return self.expand(root, path.parent, [*chain, real], depth)
+        return self.expand(root, inner, depth)
+
+
+def _first_found(name: Path, folders: list[Path], wanted=Path.is_file) -> Path | None:
+    """``name`` if absolute, else the first ``folder / name`` that is a file (or what ``wanted``
+    accepts), or None: what Mitsuba's ``FileResolver::resolve`` finds (src/core/fresolver.cpp).
+    Raises OSError or ValueError when the name cannot be looked up at all (too long for the file
+    system, a NUL byte) and is found nowhere."""
+    error: OSError | ValueError | None = None
+    for candidate in [name] if name.is_absolute() else [folder / name for folder in folders]:
+        try:
+            if wanted(candidate):
+                return candidate
+        except (OSError, ValueError) as exc:
+            error = error or exc
+    if error is not None:
+        raise error
+    return None
 
 
 def _collect_ids(root: Element, aliases: list[Element]) -> dict[str, Element]:

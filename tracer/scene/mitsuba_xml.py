@@ -521,7 +521,7 @@ class _SceneReader:
             p.fail("missing property 'filename'")
         face_normals = p.boolean("face_normals", False)
         p.boolean("flip_tex_coords", True)  # texture coordinates: nothing tracer reads
-        path = self.document.find_file(name, p.element)
+        path = self.document.find_file(name)
         try:
             mesh = read_mesh_file(path)
         except MeshError as exc:
