@@ -658,6 +658,44 @@ def test_unit_normals_come_back_from_a_mesh_file_bit_for_bit(tmp_path):
             np.testing.assert_allclose(normals_read, expected, rtol=0, atol=4e-16)
 
 
+def test_quads_and_polygons_are_fans_as_mitsubas_obj_loader_makes_them(tmp_path):
+    """Mitsuba's OBJ loader (src/shapes/obj.cpp) makes a face of k corners the k - 2 triangles
+    (c0, c1, c2), (c0, c2, c3), ...: mitsuba-data's Cornell box luminaire, one quad, was refused
+    ("holds no triangles"). An all-quad OBJ keeps its normals (trimesh would drop them), a mixed
+    one its order; PLY quads and pentagons are the same fans (Mitsuba 3.9.1 refuses PLY faces
+    that are not triangles: tracer reads them as its OBJ loader would). No faces: refused."""
+    from tracer.scene.mesh import MeshError, read_mesh_file
+
+    def mesh_of(name: str, text: str):
+        (tmp_path / name).write_text(text)
+        return read_mesh_file(tmp_path / name)
+
+    luminaire = ("v 343.0 548.8 227.0\nv 343.0 548.8 332.0\nv 213.0 548.8 332.0\nv 213.0 548.8 227.0\n"
+                 "f 1 2 3 4\n")
+    assert mesh_of("luminaire.obj", luminaire).faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+    scene = load(tmp_path, f'<shape type="obj"><string name="filename" value="luminaire.obj"/>{EMIT}</shape>')
+    assert len(scene.faces) == 2 and np.allclose(scene.vertices[scene.faces[1, 2]], [213.0, 548.8, 227.0])
+    corners = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv -1 0.5 0\n"
+    normals = np.array([[0, 0, 1], [0, 0.6, 0.8], [0.6, 0, 0.8], [0.8, 0, 0.6]])
+    quad = mesh_of("normals.obj", corners + "".join(f"vn {a} {b} {c}\n" for a, b, c in normals)
+                   + "f 1//1 2//2 3//3 4//4\n")
+    assert quad.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and quad.normals.tolist() == normals.tolist()
+    mixed = mesh_of("mixed.obj", corners + "f 1 2 4\n  f 2 3 4 5 1\n")
+    assert mixed.faces.tolist() == [[0, 1, 3], [1, 2, 3], [1, 3, 4], [1, 4, 0]]
+    header = ("ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+              "property float z\nproperty float nx\nproperty float ny\nproperty float nz\nelement face {}\n"
+              "property list uchar int vertex_indices\nend_header\n")
+    vertices = "".join(f"{line[2:]} 0 0 1\n" for line in corners.splitlines())
+    quads = mesh_of("quads.ply", header.format(2) + vertices + "4 0 1 2 3\n4 4 3 2 1\n")
+    assert quads.faces.tolist() == [[0, 1, 2], [0, 2, 3], [4, 3, 2], [4, 2, 1]]
+    assert quads.normals.tolist() == [[0, 0, 1]] * 5
+    assert mesh_of("pentagon.ply", header.format(1) + vertices + "5 0 1 2 3 4\n").faces.tolist() == \
+        [[0, 1, 2], [0, 2, 3], [0, 3, 4]]
+    for name, text in [("empty.obj", corners), ("empty.ply", header.format(0) + vertices)]:
+        with pytest.raises(MeshError, match="holds no faces"):
+            mesh_of(name, text)
+
+
 @pytest.mark.parametrize("shape, words", [
     ('<shape type="serialized"/>', ["serialized", "PLY"]),
     ('<shape type="instance"/>', ["instance", "instancing"]),
