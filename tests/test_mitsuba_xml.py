@@ -848,8 +848,10 @@ def test_unused_declarations_are_checked_as_mitsuba_checks_them(tmp_path):
     it. A twosided (one BSDF, or two: Mitsuba's twosided takes two), a dielectric or another of
     Mitsuba's BSDFs that tracer does not render load; values out of range, an unknown type, a
     dielectric inside a twosided (Mitsuba nests only BSDFs without transmission), a twosided
-    without a BSDF and an area emitter's negative radiance are refused. (Textures are refused
-    wherever they are.)"""
+    without a BSDF, a twosided that refers to itself (Mitsuba: "circular reference detected")
+    and an area emitter's negative radiance are refused. A chain of 3000 twosided BSDFs, each
+    referring to the next, is checked without recursion. (Textures are refused wherever they
+    are.)"""
     for body in ('<bsdf type="twosided" id="both"><bsdf type="diffuse"/></bsdf>',
                  '<bsdf type="twosided" id="two"><bsdf type="diffuse"/><bsdf type="conductor"/></bsdf>',
                  '<bsdf type="dielectric" id="glass"/>', '<bsdf type="principled" id="p"/>',
@@ -862,9 +864,13 @@ def test_unused_declarations_are_checked_as_mitsuba_checks_them(tmp_path):
             ('<bsdf type="twosided" id="t">\n<bsdf type="dielectric"/></bsdf>',
              ["dielectric inside a twosided"]),
             ('<bsdf type="twosided" id="t"/>', ["twosided needs one or two nested BSDFs"]),
+            ('<bsdf type="twosided" id="a"><ref id="b"/></bsdf>\n<bsdf type="twosided" id="b"><ref id="a"/>'
+             '</bsdf>', ['<ref id="a">: a circular reference']),
             ('<texture type="checkerboard" id="t"/>', ["textures"]),
             ('<emitter type="area" id="e"><rgb name="radiance" value="-1"/></emitter>', [">= 0"])]:
         refused(tmp_path, body, *words)
+    chain = "".join(f'<bsdf type="twosided" id="t{i}"><ref id="t{i + 1}"/></bsdf>' for i in range(3000))
+    assert len(load(tmp_path, chain + '<bsdf type="diffuse" id="t3000"/>').materials.names) == 1
 
 
 def test_sample_visible_false_is_told(tmp_path):

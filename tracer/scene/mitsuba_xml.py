@@ -297,9 +297,7 @@ class _SceneReader:
                 child.fail("not expected directly inside <scene>")
         # Declarations nothing refers to are still checked, as Mitsuba builds them too.
         used = {key[0] for key in self.rows}
-        for element in declared_bsdfs:
-            if id(element) not in used:
-                self.unused_bsdf(element)
+        self.unused_bsdfs([element for element in declared_bsdfs if id(element) not in used])
         for element in declared_emitters:
             if id(element) not in self.emitter_owner:
                 self.area_radiance(element)
@@ -616,24 +614,45 @@ class _SceneReader:
                                                  False)
         return self.default_row
 
-    def unused_bsdf(self, bsdf: Element) -> None:
-        """Check a BSDF no shape uses, as Mitsuba checks it when it builds it: one that tracer
-        reads is read (its values must be what Mitsuba takes), a twosided's one or two nested
-        BSDFs each so (Mitsuba's twosided refuses a dielectric inside, src/bsdfs/twosided.cpp);
-        another of Mitsuba's BSDFs is accepted unread, an unknown type refused."""
-        p = self.plugin(bsdf)
-        if p.type == "twosided":
+    def unused_bsdfs(self, bsdfs: list[Element]) -> None:
+        """Check BSDFs no shape uses, as Mitsuba checks them when it builds them: one that
+        tracer reads is read (its values must be what Mitsuba takes), a twosided's one or two
+        nested BSDFs each so (Mitsuba's twosided refuses a dielectric inside,
+        src/bsdfs/twosided.cpp); another of Mitsuba's BSDFs is accepted unread, an unknown type
+        refused. Depth first without recursion, as references may chain twosided BSDFs as long
+        as the scene is; a reference cycle is refused, as Mitsuba refuses it (parser.cpp,
+        ``check_cycles``)."""
+        checked: set[int] = set()
+        inside: set[int] = set()  # the twosided BSDFs whose nested ones are being checked
+        # ("enter", a BSDF, the element naming it) and ("leave", a twosided, None), last first
+        work: list[tuple[str, Element, Element | None]] = [("enter", b, b) for b in reversed(bsdfs)]
+        while work:
+            step, bsdf, written = work.pop()
+            if step == "leave":
+                inside.discard(id(bsdf))
+                checked.add(id(bsdf))
+                continue
+            if id(bsdf) in inside:
+                written.fail("a circular reference: this BSDF would be nested in itself")
+            if id(bsdf) in checked:
+                continue
+            p = self.plugin(bsdf)
+            if p.type != "twosided":
+                if p.type in _READ_BSDFS or p.type not in _MITSUBA_BSDFS:
+                    self.bsdf_triple(p)
+                checked.add(id(bsdf))
+                continue
             nested = p.nested("bsdf")
             if not nested or len(nested) > 2:
                 p.fail(f"twosided needs one or two nested BSDFs, not {len(nested)}")
-            for inner, written in nested:
+            for inner, naming in nested:
                 if inner.attrs.get("type") in _DIELECTRICS:
-                    written.fail("a dielectric inside a twosided (Mitsuba nests only BSDFs without "
-                                 "transmission)", bsdf)
-                self.unused_bsdf(inner)
+                    naming.fail("a dielectric inside a twosided (Mitsuba nests only BSDFs without "
+                                "transmission)", bsdf)
             p.done()
-        elif p.type in _READ_BSDFS or p.type not in _MITSUBA_BSDFS:
-            self.bsdf_triple(p)
+            inside.add(id(bsdf))
+            work.append(("leave", bsdf, None))
+            work.extend(("enter", inner, naming) for inner, naming in reversed(nested))
 
     def material(self, bsdf: Element, written: Element) -> int:
         twosided = bsdf.attrs.get("type") == "twosided"
