@@ -1089,6 +1089,8 @@ def test_files_are_found_as_mitsubas_file_resolver_finds_them(tmp_path):
         load_scene(tmp_path / "main.xml")
     refused(tmp_path, '<path value="nowhere"/>', "folder not found: 'nowhere'", line=3)
     refused(tmp_path, '<shape type="cube"><path value="."/></shape>', "directly inside <scene>", line=3)
+    refused(tmp_path, '<path value="."/>' * document.MAX_PATHS + '\n<path value="."/>',
+            "more than 100 <path>", line=4)
     message = refused(tmp_path, '<include filename="nothere.xml"/>', "included file not found", line=3)
     assert f"looked in {tmp_path}" in message
 

@@ -50,6 +50,9 @@ MAX_FILE_BYTES = 64 << 20  # far beyond any scene file (meshes live in their own
 # max_include_depth 15, counted from the main file at depth 0): tracer reads all it reads.
 MAX_INCLUDE_DEPTH = 16
 MAX_FILES = 1000  # files read through includes, in all
+# <path> folders in all files: every include and mesh file is looked for in each, and every
+# included file keeps its own copy of the list (scenes have one or two).
+MAX_PATHS = 100
 MAX_NESTING = 64  # elements inside elements, includes spliced in
 MAX_SUBSTITUTED = 1 << 20  # characters of an attribute after $name substitution
 # Characters that $name substitution may add in the whole document. A scene's parameters are
@@ -289,6 +292,7 @@ class _Expansion:
         self.defaults: dict[str, str] = {}
         self.aliases: list[Element] = []
         self.files = 1
+        self.paths = 0
         self.substituted = 0  # characters $name substitution has added, in all files
 
     def substitute(self, element: Element) -> None:
@@ -347,6 +351,9 @@ class _Expansion:
                 self._no_children(child)
                 if parent.tag != "scene":  # Mitsuba: "<path>: path can only be child of root"
                     child.fail("a <path> belongs directly inside <scene>")
+                self.paths += 1
+                if self.paths > MAX_PATHS:
+                    child.fail(f"more than {MAX_PATHS} <path> folders in the scene")
                 scope.resolver.insert(0, self._path_folder(child, scope))
             elif child.tag == "alias":
                 self._no_children(child)
