@@ -145,8 +145,8 @@ def test_convert_command(tmp_path, capsys, monkeypatch):
 ])
 def test_convert_refusals_exit_2_with_one_line(argv, words, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "bad.xml").write_text('<scene version="3.0.0">\n<bsdf type="dielectric" id="glass"/>\n'
-                                      '</scene>')
+    (tmp_path / "bad.xml").write_text('<scene version="3.0.0">\n<shape type="cube"><bsdf type="dielectric" '
+                                      'id="glass"/></shape>\n</scene>')
     (tmp_path / "same.toml").write_text((SHIPPED / "point_light.toml").read_text())
     replace = {"SCENE": str(DATA / "features.xml"), "BAD": "bad.xml", "SAME": "same.toml"}
     assert cli.main([replace.get(a, a) for a in argv]) == 2

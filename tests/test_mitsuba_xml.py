@@ -357,6 +357,62 @@ def test_sensor_refusals(tmp_path, sensor, words):
     refused(tmp_path, sensor, *words, line=3, sensor=False)
 
 
+def test_focus_distance_and_banner_are_read_and_ignored(tmp_path):
+    """Mitsuba 3.9.1 reads a perspective sensor's focus_distance (every projective camera has
+    one; a pinhole's image does not depend on it) and an hdrfilm's banner (of any type: it marks
+    it read and writes none), so both load without a note; aperture_radius is the thin lens's,
+    which Mitsuba's perspective sensor leaves unread, and refuses."""
+    notes = []
+    path = write(tmp_path, '<sensor type="perspective"><float name="focus_distance" value="1000"/>'
+                           '<film type="hdrfilm"><boolean name="banner" value="false"/>'
+                           '<integer name="width" value="8"/><integer name="height" value="6"/></film>'
+                           '</sensor>', sensor=False)
+    scene = load_scene(path, notify=notes.append)
+    assert (scene.camera.width, scene.camera.height) == (8, 6) and notes == []
+    refused(tmp_path, '<sensor type="perspective"><float name="aperture_radius" value="0.1"/></sensor>',
+            "no property 'aperture_radius'", line=3, sensor=False)
+
+
+def test_camera_matrices_rigid_to_printed_precision_are_mitsubas(tmp_path):
+    """A look-at written as a 16-number matrix to 6 or 5 significant digits (an entry of
+    M M^T - I about 1e-6 or 1.3e-5; the survey of public scenes found such cameras refused)
+    loads, and its rays are Mitsuba's (M times the camera-space direction) to within that; a
+    scale is refused where Mitsuba refuses it (an entry of M M^T - I beyond 1e-3:
+    Transform::has_scale, in the perspective sensor's constructor), and not before."""
+    origin, target = np.array([278.0, 273.0, -800.0]), np.array([268.0, 263.0, -799.0])
+    forward = (target - origin) / np.linalg.norm(target - origin)
+    left = np.cross([0.0, 1.0, 0.0], forward)
+    left /= np.linalg.norm(left)
+    exact = np.eye(4)
+    exact[:3, :3] = np.stack([left, np.cross(forward, left), forward], axis=1)
+    exact[:3, 3] = origin
+
+    def sensor(matrix: np.ndarray, digits: int) -> str:
+        value = " ".join(f"{v:.{digits}g}" for v in matrix.ravel())
+        return (f'<sensor type="perspective"><float name="fov" value="40"/><transform name="to_world">'
+                f'<matrix value="{value}"/></transform></sensor>')
+
+    for digits, deviation in [(6, 1e-6), (5, 1e-5)]:
+        written = np.array([float(f"{v:.{digits}g}") for v in exact.ravel()]).reshape(4, 4)
+        assert np.max(np.abs(written[:3, :3] @ written[:3, :3].T - np.eye(3))) > deviation
+        camera = load_scene(write(tmp_path, sensor(written, digits), sensor=False)).camera
+        f, r, u = camera.basis
+        tan_half, aspect = math.tan(math.radians(camera.fov) / 2), camera.width / camera.height
+        for sx, sy in [(0.0, 0.0), (1.0, 1.0), (-1.0, 0.5)]:  # film positions, -1 to 1 across
+            local = np.array([-sx * tan_half * aspect, sy * tan_half, 1.0])  # Mitsuba's +x: the left
+            mitsuba = written[:3, :3] @ (local / np.linalg.norm(local))
+            ours = f + sx * tan_half * aspect * r + sy * tan_half * u
+            np.testing.assert_allclose(ours / np.linalg.norm(ours), mitsuba / np.linalg.norm(mitsuba),
+                                       atol=3 * deviation)
+    for scale, kept in [(1.0004, True), (1.0006, False)]:  # M M^T - I: 8e-4 and 1.2e-3 on the diagonal
+        scaled = exact.copy()
+        scaled[:3, :3] *= scale
+        if kept:
+            load_scene(write(tmp_path, sensor(scaled, 9), sensor=False))
+        else:
+            refused(tmp_path, sensor(scaled, 9), "scales or shears", line=3, sensor=False)
+
+
 def test_no_sensor_is_refused(tmp_path):
     refused(tmp_path, '<shape type="cube"/>', "no <sensor>", sensor=False)
 
@@ -602,6 +658,44 @@ def test_unit_normals_come_back_from_a_mesh_file_bit_for_bit(tmp_path):
             np.testing.assert_allclose(normals_read, expected, rtol=0, atol=4e-16)
 
 
+def test_quads_and_polygons_are_fans_as_mitsubas_obj_loader_makes_them(tmp_path):
+    """Mitsuba's OBJ loader (src/shapes/obj.cpp) makes a face of k corners the k - 2 triangles
+    (c0, c1, c2), (c0, c2, c3), ...: mitsuba-data's Cornell box luminaire, one quad, was refused
+    ("holds no triangles"). An all-quad OBJ keeps its normals (trimesh would drop them), a mixed
+    one its order; PLY quads and pentagons are the same fans (Mitsuba 3.9.1 refuses PLY faces
+    that are not triangles: tracer reads them as its OBJ loader would). No faces: refused."""
+    from tracer.scene.mesh import MeshError, read_mesh_file
+
+    def mesh_of(name: str, text: str):
+        (tmp_path / name).write_text(text)
+        return read_mesh_file(tmp_path / name)
+
+    luminaire = ("v 343.0 548.8 227.0\nv 343.0 548.8 332.0\nv 213.0 548.8 332.0\nv 213.0 548.8 227.0\n"
+                 "f 1 2 3 4\n")
+    assert mesh_of("luminaire.obj", luminaire).faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+    scene = load(tmp_path, f'<shape type="obj"><string name="filename" value="luminaire.obj"/>{EMIT}</shape>')
+    assert len(scene.faces) == 2 and np.allclose(scene.vertices[scene.faces[1, 2]], [213.0, 548.8, 227.0])
+    corners = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv -1 0.5 0\n"
+    normals = np.array([[0, 0, 1], [0, 0.6, 0.8], [0.6, 0, 0.8], [0.8, 0, 0.6]])
+    quad = mesh_of("normals.obj", corners + "".join(f"vn {a} {b} {c}\n" for a, b, c in normals)
+                   + "f 1//1 2//2 3//3 4//4\n")
+    assert quad.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and quad.normals.tolist() == normals.tolist()
+    mixed = mesh_of("mixed.obj", corners + "f 1 2 4\n  f 2 3 4 5 1\n")
+    assert mixed.faces.tolist() == [[0, 1, 3], [1, 2, 3], [1, 3, 4], [1, 4, 0]]
+    header = ("ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+              "property float z\nproperty float nx\nproperty float ny\nproperty float nz\nelement face {}\n"
+              "property list uchar int vertex_indices\nend_header\n")
+    vertices = "".join(f"{line[2:]} 0 0 1\n" for line in corners.splitlines())
+    quads = mesh_of("quads.ply", header.format(2) + vertices + "4 0 1 2 3\n4 4 3 2 1\n")
+    assert quads.faces.tolist() == [[0, 1, 2], [0, 2, 3], [4, 3, 2], [4, 2, 1]]
+    assert quads.normals.tolist() == [[0, 0, 1]] * 5
+    assert mesh_of("pentagon.ply", header.format(1) + vertices + "5 0 1 2 3 4\n").faces.tolist() == \
+        [[0, 1, 2], [0, 2, 3], [0, 3, 4]]
+    for name, text in [("empty.obj", corners), ("empty.ply", header.format(0) + vertices)]:
+        with pytest.raises(MeshError, match="holds no faces"):
+            mesh_of(name, text)
+
+
 @pytest.mark.parametrize("shape, words", [
     ('<shape type="serialized"/>', ["serialized", "PLY"]),
     ('<shape type="instance"/>', ["instance", "instancing"]),
@@ -749,12 +843,34 @@ def test_bsdf_refusals(tmp_path, bsdf, words):
     refused(tmp_path, f'<shape type="cube">\n{bsdf}</shape>', *words, line=4)
 
 
-def test_unused_declarations_are_still_checked(tmp_path):
-    refused(tmp_path, '<bsdf type="dielectric" id="glass"/>', "dielectric", line=3)
-    refused(tmp_path, '<texture type="checkerboard" id="t"/>', "textures", line=3)
-    refused(tmp_path, '<emitter type="area" id="e"><rgb name="radiance" value="-1"/></emitter>', ">= 0",
-            line=3)
-    assert len(load(tmp_path, '<bsdf type="diffuse" id="unused"/>').materials.names) == 1
+def test_unused_declarations_are_checked_as_mitsuba_checks_them(tmp_path):
+    """A declaration no shape uses changes no image: it is refused only where Mitsuba refuses
+    it. A twosided (one BSDF, or two: Mitsuba's twosided takes two), a dielectric or another of
+    Mitsuba's BSDFs that tracer does not render load; values out of range, an unknown type, a
+    dielectric inside a twosided (Mitsuba nests only BSDFs without transmission), a twosided
+    without a BSDF, a twosided that refers to itself (Mitsuba: "circular reference detected")
+    and an area emitter's negative radiance are refused. A chain of 3000 twosided BSDFs, each
+    referring to the next, is checked without recursion. (Textures are refused wherever they
+    are.)"""
+    for body in ('<bsdf type="twosided" id="both"><bsdf type="diffuse"/></bsdf>',
+                 '<bsdf type="twosided" id="two"><bsdf type="diffuse"/><bsdf type="conductor"/></bsdf>',
+                 '<bsdf type="dielectric" id="glass"/>', '<bsdf type="principled" id="p"/>',
+                 '<bsdf type="diffuse" id="d"/><bsdf type="twosided" id="t"><ref id="d"/></bsdf>'):
+        assert len(load(tmp_path, body).materials.names) == 1, body  # the black row only
+    for body, words in [
+            ('<bsdf type="twosided" id="t">\n<bsdf type="diffuse"><float name="reflectance" value="2"/>'
+             '</bsdf></bsdf>', ["<= 1"]),
+            ('<bsdf type="difuse" id="typo"/>', ["bsdf 'difuse' is not supported"]),
+            ('<bsdf type="twosided" id="t">\n<bsdf type="dielectric"/></bsdf>',
+             ["dielectric inside a twosided"]),
+            ('<bsdf type="twosided" id="t"/>', ["twosided needs one or two nested BSDFs"]),
+            ('<bsdf type="twosided" id="a"><ref id="b"/></bsdf>\n<bsdf type="twosided" id="b"><ref id="a"/>'
+             '</bsdf>', ['<ref id="a">: a circular reference']),
+            ('<texture type="checkerboard" id="t"/>', ["textures"]),
+            ('<emitter type="area" id="e"><rgb name="radiance" value="-1"/></emitter>', [">= 0"])]:
+        refused(tmp_path, body, *words)
+    chain = "".join(f'<bsdf type="twosided" id="t{i}"><ref id="t{i + 1}"/></bsdf>' for i in range(3000))
+    assert len(load(tmp_path, chain + '<bsdf type="diffuse" id="t3000"/>').materials.names) == 1
 
 
 def test_sample_visible_false_is_told(tmp_path):
@@ -911,15 +1027,72 @@ def test_the_feature_scene(tmp_path):
 def test_include_cycles_depth_and_roots(tmp_path):
     with pytest.raises(InputError, match="include cycle"):
         load_scene(DATA / "cycle_a.xml")
-    for i in range(20):
-        include = f'<include filename="d{i + 1}.xml"/>'
-        (tmp_path / f"d{i}.xml").write_text(f'<scene version="3.0.0">{include}</scene>')
-    (tmp_path / "d20.xml").write_text('<scene version="3.0.0"/>')
-    with pytest.raises(InputError, match="includes nested more than 16 deep"):
-        load_scene(tmp_path / "d0.xml")
     (tmp_path / "part.xml").write_text('<bsdf type="diffuse"/>')
     refused(tmp_path, '<include filename="part.xml"/>', "root element is <scene>")
-    refused(tmp_path, '<include filename="nothere.xml"/>', "included file not found", line=3)
+
+
+@pytest.mark.parametrize("nested", [document.MAX_INCLUDE_DEPTH, document.MAX_INCLUDE_DEPTH + 1])
+def test_include_depth_limit_says_what_it_does(tmp_path, nested):
+    """MAX_INCLUDE_DEPTH (16) includes nested in one another load (the main file includes d1,
+    which includes d2, ... d16); one more is refused, naming the limit."""
+    for i in range(nested):
+        include = f'<include filename="d{i + 1}.xml"/>'
+        (tmp_path / f"d{i}.xml").write_text(f'<scene version="3.0.0">{include}</scene>')
+    (tmp_path / f"d{nested}.xml").write_text(f'<scene version="3.0.0">{SENSOR}</scene>')
+    if nested <= document.MAX_INCLUDE_DEPTH:
+        assert load_scene(tmp_path / "d0.xml").camera.width == 8
+    else:
+        with pytest.raises(InputError) as caught:
+            load_scene(tmp_path / "d0.xml")
+        message = str(caught.value)
+        assert f"d{nested - 1}.xml:1: <include>: more than 16 includes nested in one another" in message
+
+
+def test_files_are_found_as_mitsubas_file_resolver_finds_them(tmp_path):
+    """Mitsuba 3.9.1 (src/core/parser.cpp, src/core/fresolver.cpp): an include is looked for
+    beside the including file, then where that file's own names are looked for (its <path>
+    folders, the including file's folder, ..., the main file's <path> folders, the main
+    scene's folder); a mesh in the main file's <path> folders and then the main scene's folder,
+    not beside the file that names it. A <path> of an included file serves its includes only.
+    As mitsuba-data's scenes/cbox/cbox-rgb.xml does: fragments name meshes and each other
+    relative to the main scene."""
+    (tmp_path / "fragments" / "parts").mkdir(parents=True)
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "fragments" / "parts" / "tri_in_parts.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+
+    def scene_file(path: Path, body: str) -> None:
+        path.write_text(f'<scene version="3.0.0">{body}</scene>')
+
+    scene_file(tmp_path / "main.xml", f'{SENSOR}<path value="lib"/><include filename="fragments/a.xml"/>'
+                                      '<include filename="from_lib.xml"/>')
+    scene_file(tmp_path / "lib" / "from_lib.xml", '<bsdf type="diffuse" id="lib"/>')
+    # a.xml: b.xml is the main scene's fragments/b.xml, c.xml is beside a.xml, e.xml in its <path>
+    scene_file(tmp_path / "fragments" / "a.xml",
+               '<include filename="fragments/b.xml"/><include filename="c.xml"/><path value="parts"/>'
+               '<include filename="e.xml"/><shape type="obj"><string name="filename" value="meshes/tri.obj"/>'
+               '<ref id="lib"/></shape>')
+    scene_file(tmp_path / "fragments" / "b.xml", '<bsdf type="diffuse" id="b"/>')
+    scene_file(tmp_path / "fragments" / "c.xml", '<bsdf type="diffuse" id="c"/>')
+    scene_file(tmp_path / "c.xml", '<bsdf type="conductor" id="not_this_c"/>')  # beside a.xml comes first
+    scene_file(tmp_path / "fragments" / "parts" / "e.xml", '<bsdf type="diffuse" id="e"/>')
+    assert set(document.read_document(str(tmp_path / "main.xml")).ids) == {"lib", "b", "c", "e"}
+    scene = load_scene(tmp_path / "main.xml")
+    assert scene.shapes[0].record["file"] == str(tmp_path / "meshes" / "tri.obj")
+    assert scene.materials.names[scene.shapes[0].material] == "lib"
+    # a <path> in an included file does not reach the meshes (Mitsuba builds them after parsing)
+    scene_file(tmp_path / "fragments" / "e.xml", '<shape type="obj"><string name="filename" '
+                                                 'value="tri_in_parts.obj"/></shape>')
+    scene_file(tmp_path / "fragments" / "parts" / "e.xml", '<include filename="../e.xml"/>')
+    with pytest.raises(InputError, match="mesh file not found"):
+        load_scene(tmp_path / "main.xml")
+    refused(tmp_path, '<path value="nowhere"/>', "folder not found: 'nowhere'", line=3)
+    refused(tmp_path, '<shape type="cube"><path value="."/></shape>', "directly inside <scene>", line=3)
+    refused(tmp_path, '<path value="."/>' * document.MAX_PATHS + '\n<path value="."/>',
+            "more than 100 <path>", line=4)
+    message = refused(tmp_path, '<include filename="nothere.xml"/>', "included file not found", line=3)
+    assert f"looked in {tmp_path}" in message
 
 
 def test_ids_refs_and_aliases(tmp_path):
@@ -1051,6 +1224,78 @@ def test_render_reference_compare_and_check_take_xml_scenes(tmp_path, capsys):
     assert err == [f'tracer: error: {bad}:4: <bsdf type="dielectric" id="glass">: dielectric is not '
                    "supported (tracer renders direct light only: light through a dielectric arrives along "
                    "paths of two or more bounces)"]
+
+
+def test_substitution_is_bounded_while_it_is_done(tmp_path):
+    """$name defaults that double at every step, used many times: one attribute made of 256 uses
+    of a default just under the attribute limit (128 Mi characters) is refused before it is
+    built, and 100 attributes of one use each (50 Mi characters in all) when the whole scene's
+    substitutions pass MAX_SUBSTITUTED_TOTAL, each in one line naming the file, line, element
+    and attribute, with little memory (a 1 MB file of such attributes took 4 GB and 48 s)."""
+    import tracemalloc
+
+    doubled = ('<default name="a0" value="x"/>'
+               + "".join(f'<default name="a{i + 1}" value="$a{i}$a{i}"/>' for i in range(19)))  # $a19: 2^19
+    cases = {
+        "one": (f'<shape type="cube" id="{"$a19" * 256}"/>', '<shape type="cube" id="$a19$a19',
+                "attribute 'id' is longer than 1048576 characters", 4 * document.MAX_SUBSTITUTED),
+        "many": ("".join(f'<bsdf type="diffuse" id="$a19-{i}"/>' for i in range(100)),
+                 '<bsdf type="diffuse" id="$a19-30">', "attribute 'id': substituting $names makes more than",
+                 24 * document.MAX_SUBSTITUTED),  # MAX_SUBSTITUTED_TOTAL is 16 of them
+    }
+    for name, (body, element, words, most_bytes) in cases.items():
+        path = tmp_path / f"{name}.xml"
+        path.write_text(f'<scene version="3.0.0">{doubled}\n{body}</scene>')
+        tracemalloc.start()
+        try:
+            with pytest.raises(InputError) as caught:
+                document.read_document(str(path))
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        message = str(caught.value)
+        assert message.startswith(f"{path}:2: {element}") and words in message, message
+        assert len(message) < 400 and peak < most_bytes, (name, len(message), peak)
+
+
+def test_huge_names_give_short_lines_quickly(tmp_path):
+    """An echoed user string (an id, a type, a property or attribute name, a $name, a conductor
+    or IOR name, an include's file name, a tag) of 8 MB is cut in the error line (errors.shown),
+    and the refusal takes about as long as parsing the file (a 60 MB material name gave a 60 MB
+    line after 78 s; folding its case once per conductor name took seconds)."""
+    import time
+
+    big = "m" * (8 << 20)
+    cases = {
+        "id": f'<shape type="cube"><bsdf type="dielectric" id="{big}"/></shape>',
+        "type": f'<shape type="cube"><bsdf type="{big}"/></shape>',
+        "property": f'<shape type="cube"><float name="{big}" value="1"/></shape>',
+        "ref": f'<shape type="cube"><ref id="{big}"/></shape>',
+        "duplicate": f'<bsdf type="diffuse" id="{big}"/><bsdf type="diffuse" id="{big}"/>',
+        "parameter": f'<shape type="cube" id="${big}"/>',
+        "attribute": f'<shape type="cube" {big}="1"/>',
+        "conductor": f'<shape type="cube"><bsdf type="conductor"><string name="material" value="{big}"/>'
+                     '</bsdf></shape>',
+        "ior": f'<shape type="cube"><bsdf type="plastic"><string name="int_ior" value="{big}"/></bsdf>'
+               '</shape>',
+        "number": f'<shape type="sphere"><float name="radius" value="{big}"/></shape>',
+        "include": f'<include filename="{big}"/>',
+        "mesh": f'<shape type="obj"><string name="filename" value="{big}"/></shape>',
+        "tag": f"<{big}/>",
+        "version": None,
+    }
+    for name, body in cases.items():
+        path = tmp_path / f"{name}.xml"
+        path.write_text(f'<scene version="3.{big}.0"/>' if body is None else
+                        f'<scene version="3.0.0">{SENSOR}{body}</scene>')
+        start = time.perf_counter()
+        with pytest.raises(InputError) as caught:
+            load_scene(path)
+        seconds = time.perf_counter() - start
+        message = str(caught.value)
+        # (at most the path, the element, 80 characters of the name and a list of Mitsuba's names)
+        assert "\n" not in message and len(message) < 1000 and "mmmm" in message, (name, message[:1100])
+        assert seconds < 10, (name, seconds)  # parsing 8 MB with expat takes about 0.3 s
 
 
 def test_hostile_documents_are_refused_in_one_line(tmp_path):

@@ -1,15 +1,20 @@
 """Mesh files and vertex normals, for every scene reader.
 
-:func:`read_mesh_file` reads a triangle mesh (PLY, OBJ and whatever else trimesh reads) with
-the vertex normals the file holds, checked; :func:`angle_weighted_normals` computes vertex
-normals where a file has none and a scene asks for smooth shading, as Mitsuba 3 does: each
-face adds its unit normal weighted by its angle at the vertex (Thürmer and Wüthrich 1998,
-"Computing vertex normals from polygonal facets", JGT 3(1); checked against Mitsuba 3.9's
+:func:`read_mesh_file` reads a mesh (PLY, OBJ and whatever else trimesh reads) with the vertex
+normals the file holds, checked; a face of more than three corners (a quad, a polygon) becomes
+a fan of triangles from its first corner, as Mitsuba 3's OBJ loader makes it
+(src/shapes/obj.cpp: each corner after the third makes a triangle with the first and the one
+before it; like Mitsuba, tracer takes polygons to be convex). :func:`angle_weighted_normals`
+computes vertex normals where a file has none and a scene asks for smooth shading, as Mitsuba 3
+does: each face adds its unit normal weighted by its angle at the vertex (Thürmer and Wüthrich
+1998, "Computing vertex normals from polygonal facets", JGT 3(1); checked against Mitsuba 3.9's
 ``vertex_normals`` on a fan of unequal faces, where area and uniform weights differ).
 """
 
 from __future__ import annotations
 
+import io
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +25,9 @@ MAX_COORDINATE = 1e15
 # A vertex normal whose length is within this of 1 is unit already (float64 rounding of a
 # normalization is ~1e-16).
 UNIT_TOLERANCE = 1e-12
+
+# An OBJ face line of four corners or more.
+_OBJ_POLYGON = re.compile(r"^[ \t]*f(?:[ \t]+\S+){4,}", re.MULTILINE)
 
 
 class MeshError(ValueError):
@@ -55,7 +63,8 @@ def import_trimesh():
 
 def read_mesh_file(mesh_path: Path) -> Mesh:
     """The triangles (and vertex normals, if the file has them) of ``mesh_path``, with the
-    file's vertices, faces and winding exactly as written. Raises MeshError."""
+    file's vertices and winding exactly as written, its polygons made fans of triangles.
+    Raises MeshError."""
     trimesh = import_trimesh()
     try:
         found = mesh_path.is_file()
@@ -70,7 +79,7 @@ def read_mesh_file(mesh_path: Path) -> Mesh:
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise MeshError(f"cannot read mesh {mesh_path}: {exc}") from None
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
-        raise MeshError(f"{mesh_path} holds no triangles")
+        raise MeshError(f"{mesh_path} holds no faces (triangles or polygons)")
     if vertices.ndim != 2 or vertices.shape[1] != 3:
         raise MeshError(f"{mesh_path} holds no 3-D vertices")
     if not np.all(np.isfinite(vertices)):
@@ -110,7 +119,8 @@ def _load(trimesh, mesh_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray 
             parts = [trimesh.exchange.ply.load_ply(fh)]
     elif suffix == ".obj":
         with open(mesh_path, "r", encoding="utf-8", errors="replace") as fh:
-            loaded = trimesh.exchange.obj.load_obj(fh, maintain_order=True)
+            text = _fan_triangulated_obj(fh.read())
+        loaded = trimesh.exchange.obj.load_obj(io.StringIO(text), maintain_order=True)
         parts = list(loaded.get("geometry", {}).values()) if "geometry" in loaded else [loaded]
     else:
         mesh = trimesh.load_mesh(str(mesh_path), process=False)
@@ -125,11 +135,41 @@ def _load(trimesh, mesh_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray 
         f = np.asarray(part.get("faces", np.zeros((0, 3))), dtype=np.int64)
         n = part.get("vertex_normals")
         vertices.append(v)
-        faces.append(f.reshape(-1, f.shape[-1] if f.ndim == 2 else 3) + offset)
+        faces.append(fan_triangles(f.reshape(-1, f.shape[-1] if f.ndim == 2 else 3)) + offset)
         normals.append(None if n is None else np.asarray(n, dtype=np.float64).reshape(-1, 3))
         offset += len(v)
     all_normals = None if any(n is None for n in normals) else np.concatenate(normals)
     return np.concatenate(vertices), np.concatenate(faces), all_normals
+
+
+def fan_triangles(faces: np.ndarray) -> np.ndarray:
+    """(F, k) faces of k >= 3 corners -> (F (k - 2), 3) triangles: each face's fan (c0, c1, c2),
+    (c0, c2, c3), ..., the faces in order. Faces of fewer corners are returned as they are.
+    (trimesh gives a PLY file's faces so when they all have k corners; faces of mixed sizes it
+    splits itself, into the same triangles, grouped by size.)"""
+    corners = faces.shape[1]
+    if corners <= 3:
+        return faces
+    second = np.arange(1, corners - 1)
+    first = np.broadcast_to(faces[:, :1], (len(faces), corners - 2))
+    return np.stack([first, faces[:, second], faces[:, second + 1]], axis=2).reshape(-1, 3)
+
+
+def _fan_triangulated_obj(text: str) -> str:
+    """An OBJ file's text with each face line of k > 3 corners made k - 2 triangle lines, the fan
+    :func:`fan_triangles` makes. Done on the text, before trimesh reads it: trimesh keeps the
+    normals of triangles but drops a file's normals when all its faces have the same number of
+    corners above three, and they cannot be put back afterwards: an OBJ vertex is a triple
+    (position, texture coordinate, normal) that only the face lines spell out."""
+    if not _OBJ_POLYGON.search(text):
+        return text
+    lines = text.split("\n")
+    for i, line in enumerate(lines):
+        tokens = line.split()
+        if len(tokens) > 4 and tokens[0] == "f":
+            first = tokens[1]
+            lines[i] = "\n".join(f"f {first} {a} {b}" for a, b in zip(tokens[2:-1], tokens[3:], strict=True))
+    return "\n".join(lines)
 
 
 def angle_weighted_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

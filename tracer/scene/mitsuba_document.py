@@ -9,11 +9,14 @@ Mitsuba 3.9.1's, checked by loading small scenes with it (``tests/test_mitsuba_x
 - ``<default name value>`` defines ``$name`` for the attributes that FOLLOW it in document
   order (a use before it is an error), unless ``name`` is already defined (the first wins); a
   default's own value is substituted when it is read; an undefined ``$name`` is an error.
-- ``<include filename>`` is relative to the including file's folder; the included file's
-  root is a ``<scene>`` whose children take the include's place. Cycles and includes deeper
-  than MAX_INCLUDE_DEPTH are refused.
-- ``<path value>`` adds a folder (relative to the file that names it) searched for relative
-  file names, before the scene file's folder; the latest ``<path>`` is searched first.
+- relative file names are looked up as Mitsuba's file resolver looks them up (:class:`_Scope`):
+  an ``<include filename>`` in the including file's folder, then in the folders searched for
+  that file's own names; a mesh file in the main file's ``<path>`` folders, then the main
+  scene's folder. The included file's root is a ``<scene>`` whose children take the include's
+  place. Cycles and more than MAX_INCLUDE_DEPTH nested includes are refused.
+- ``<path value>`` (in a file's ``<scene>``, not inside an object) puts a folder (relative to
+  that file's folder, else looked up as an include is) before the others; the latest first. In
+  an included file it serves only that file's includes, as in Mitsuba.
 - every object (``bsdf``, ``shape``, ...) may have an ``id``, unique in the scene;
   ``<ref id>`` stands for it anywhere an object may appear (its ``name`` is ignored, as
   Mitsuba ignores it); ``<alias id as>`` gives it a second id.
@@ -21,7 +24,10 @@ Mitsuba 3.9.1's, checked by loading small scenes with it (``tests/test_mitsuba_x
   (left-multiplied): ``<translate x="1"/><scale value="2"/>`` moves the origin to x = 2.
 
 Parsing uses expat, which reports lines; DOCTYPE and entity declarations are refused outright
-(no entity expansion, so no "billion laughs").
+(no entity expansion, so no "billion laughs"). ``$name`` substitution, the other way to make a
+small file expand (a default that repeats another, doubling at every step), is measured while
+it is done: an attribute may not grow past MAX_SUBSTITUTED characters, nor all of them together
+past MAX_SUBSTITUTED_TOTAL, and the string past the limit is never built.
 """
 
 from __future__ import annotations
@@ -36,13 +42,25 @@ from xml.parsers import expat
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import SHOWN_CHARACTERS, InputError, shown
 
 MAX_FILE_BYTES = 64 << 20  # far beyond any scene file (meshes live in their own files)
+# Includes inside includes: the main file may include a file that includes another, and so on,
+# this many times; one more is refused. Mitsuba 3.9.1 allows 14 (parser.cpp, parse_file_impl:
+# max_include_depth 15, counted from the main file at depth 0): tracer reads all it reads.
 MAX_INCLUDE_DEPTH = 16
 MAX_FILES = 1000  # files read through includes, in all
+# <path> folders in all files: every include and mesh file is looked for in each, and every
+# included file keeps its own copy of the list (scenes have one or two).
+MAX_PATHS = 100
 MAX_NESTING = 64  # elements inside elements, includes spliced in
 MAX_SUBSTITUTED = 1 << 20  # characters of an attribute after $name substitution
+# Characters that $name substitution may add in the whole document. A scene's parameters are
+# numbers and names a few characters long (an spp, a resolution, a colour), so this is far
+# beyond any scene; without it, thousands of attributes each a little under MAX_SUBSTITUTED
+# would still make gigabytes (a 1 MB file reached 4 GB). It bounds the text substitution
+# makes to 16 Mi characters (at most 64 MB).
+MAX_SUBSTITUTED_TOTAL = 16 * MAX_SUBSTITUTED
 
 OBJECT_TAGS = frozenset({"scene", "bsdf", "emitter", "shape", "sensor", "film", "sampler", "integrator",
                          "rfilter", "texture", "medium", "phase", "volume"})
@@ -88,9 +106,10 @@ class Element:
     children: list["Element"] = field(default_factory=list)
 
     def describe(self) -> str:
-        """``<tag type="..." id="..." name="...">``, the attributes that name it."""
-        shown = "".join(f' {k}="{self.attrs[k]}"' for k in ("type", "id", "name") if k in self.attrs)
-        return f"<{self.tag}{shown}>"
+        """``<tag type="..." id="..." name="...">``, the attributes that name it (each cut to
+        ``errors.shown``'s length)."""
+        naming = "".join(f' {k}="{shown(self.attrs[k])}"' for k in ("type", "id", "name") if k in self.attrs)
+        return f"<{shown(self.tag)}{naming}>"
 
     @property
     def where(self) -> str:
@@ -113,8 +132,9 @@ class Document:
     """A scene file with its includes spliced in and its ids resolved.
 
     root : the ``<scene>`` element (``<default>``, ``<include>``, ``<path>`` and ``<alias>``
-        removed).   ids : id (and alias) -> object element.   search_folders : ``<path>``
-        folders, the latest first.   folder : the scene file's folder.
+        removed).   ids : id (and alias) -> object element.   search_folders : the main file's
+        ``<path>`` folders, the latest first.   folder : the scene's folder (the main file's,
+        unless the reader was given another).
     """
 
     path: str
@@ -127,24 +147,21 @@ class Document:
         """The object a ``<ref id>`` stands for."""
         target = self.ids.get(ref.attr("id"))
         if target is None:
-            ref.fail(f"no object has id '{ref.attrs['id']}'")
+            ref.fail(f"no object has id '{shown(ref.attrs['id'])}'")
         return target
 
-    def find_file(self, name: str, near: Element) -> Path:
-        """A file named in the scene: absolute as is; relative, in the ``<path>`` folders (the
-        latest first), the scene file's folder, then the folder of the file that names it."""
-        given = Path(name)
-        if given.is_absolute():
-            return given
-        folders = [*self.search_folders, self.folder, Path(near.file).parent]
-        for folder in folders:
-            candidate = folder / given
-            try:
-                if candidate.is_file():
-                    return candidate
-            except OSError:
-                continue
-        return self.folder / given  # missing: the reader names it in its message
+    def find_file(self, name: str) -> Path:
+        """A file the scene names (a mesh): absolute as is; relative, the first that exists of
+        the main file's ``<path>`` folders (the latest first) and the scene's folder, as
+        Mitsuba's file resolver finds it when it builds the shapes (``Mesh::Mesh`` in
+        src/render/mesh.cpp: ``file_resolver()->resolve(filename)``, after parsing, when only
+        the main file's ``<path>`` folders are left in it). Mitsuba also looks in the folder it
+        was started from; tracer does not (a scene would then depend on where it is rendered)."""
+        try:
+            found = _first_found(Path(name), [*self.search_folders, self.folder])
+        except (OSError, ValueError):
+            found = None
+        return found if found is not None else self.folder / name  # missing: the reader says so
 
 
 def read_document(path: str, base: Path | None = None) -> Document:
@@ -154,11 +171,12 @@ def read_document(path: str, base: Path | None = None) -> Document:
     if root.tag != "scene":
         root.fail("the root element of a Mitsuba scene is <scene>")
     _check_version(root)
-    state = _Expansion(top=Path(path))
-    root.children = state.expand(root, Path(path).parent, [os.path.realpath(path)], 1)
+    state = _Expansion()
+    main = _Scope(Path(path).parent, [], [os.path.realpath(path)], Path(path).parent)
+    root.children = state.expand(root, main, 1)
     ids = _collect_ids(root, state.aliases)
     folder = base if base is not None else Path(path).parent
-    return Document(path, root, ids, state.search_folders, folder)
+    return Document(path, root, ids, main.resolver, folder)
 
 
 def _check_version(scene: Element) -> None:
@@ -167,33 +185,32 @@ def _check_version(scene: Element) -> None:
         scene.fail("missing attribute 'version' (Mitsuba 3 scenes say <scene version=\"3.0.0\">)")
     match = re.fullmatch(r"([0-9]{1,6})\.([0-9]{1,6})\.([0-9]{1,6})", version.strip())
     if not match:
-        shown = version if len(version) <= 40 else version[:37] + "..."
-        scene.fail(f"version '{shown}' is not of the form major.minor.patch")
+        scene.fail(f"version '{shown(version)}' is not of the form major.minor.patch")
     if int(match.group(1)) not in (2, 3):
-        scene.fail(f"version {version}: tracer reads Mitsuba 2 and 3 scenes; older scenes use other "
-                   "names (upgrade them with Mitsuba 3 first)")
+        scene.fail(f"version {version.strip()}: tracer reads Mitsuba 2 and 3 scenes; older scenes use "
+                   "other names (upgrade them with Mitsuba 3 first)")
 
 
-def _parse_file(path: str, shown: str) -> Element:
-    """The element tree of one XML file; ``shown`` names it in messages."""
+def _parse_file(path: str, label: str) -> Element:
+    """The element tree of one XML file; ``label`` names it in messages."""
     try:
         with open(path, "rb") as fh:
-            data = fh.read(MAX_FILE_BYTES + 1)
+            data = _read_at_most(fh, MAX_FILE_BYTES + 1)
     except FileNotFoundError:
-        raise InputError("no such scene file", shown) from None
+        raise InputError("no such scene file", label) from None
     except IsADirectoryError:
-        raise InputError("is a directory, not a scene file", shown) from None
+        raise InputError("is a directory, not a scene file", label) from None
     except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", shown) from None
+        raise InputError(f"cannot read: {exc.strerror}", label) from None
     if len(data) > MAX_FILE_BYTES:
-        raise InputError(f"larger than {MAX_FILE_BYTES >> 20} MiB: not a scene file", shown)
+        raise InputError(f"larger than {MAX_FILE_BYTES >> 20} MiB: not a scene file", label)
 
     parser = expat.ParserCreate()
     stack: list[Element] = []
     roots: list[Element] = []
 
     def start(tag: str, attrs: dict[str, str]) -> None:
-        element = Element(tag, dict(attrs), shown, parser.CurrentLineNumber)
+        element = Element(tag, dict(attrs), label, parser.CurrentLineNumber)
         if len(stack) >= MAX_NESTING:
             element.fail(f"elements nested more than {MAX_NESTING} deep")
         (stack[-1].children if stack else roots).append(element)
@@ -205,7 +222,7 @@ def _parse_file(path: str, shown: str) -> Element:
     def refuse(what: str):
         def handler(*args) -> None:
             raise InputError(f"{what} are not allowed in a scene file (no entity expansion)",
-                             f"{shown}:{parser.CurrentLineNumber}")
+                             f"{label}:{parser.CurrentLineNumber}")
         return handler
 
     parser.StartElementHandler = start
@@ -219,47 +236,103 @@ def _parse_file(path: str, shown: str) -> Element:
         parser.Parse(data, True)
     except expat.ExpatError as exc:
         raise InputError(f"not well-formed XML: {expat.ErrorString(exc.code)} (column {exc.offset + 1})",
-                         f"{shown}:{exc.lineno}") from None
+                         f"{label}:{exc.lineno}") from None
     except LookupError as exc:  # an encoding declaration Python does not know
-        raise InputError(f"not readable XML: {exc}", shown) from None
+        raise InputError(f"not readable XML: {shown(exc)}", label) from None
     except RecursionError:
-        raise InputError("nested too deeply", shown) from None
+        raise InputError("nested too deeply", label) from None
     if not roots:
-        raise InputError("no XML element", shown)
+        raise InputError("no XML element", label)
     return roots[0]
+
+
+def _read_at_most(fh, limit: int) -> bytes:
+    """The first ``limit`` bytes of ``fh``, read a megabyte at a time: ``fh.read(limit)`` would
+    take ``limit`` bytes of memory for any file, however small."""
+    chunks, size = [], 0
+    while size < limit and (chunk := fh.read(min(1 << 20, limit - size))):
+        chunks.append(chunk)
+        size += len(chunk)
+    return b"".join(chunks)
+
+
+@dataclass
+class _Scope:
+    """One file as it is expanded, with what Mitsuba's file resolver holds while it is read
+    (src/core/parser.cpp, ``parse_xml_node``: an ``<include>`` is looked up in a copy of the
+    resolver with the including file's folder put first, and the included file is read with
+    that copy; a ``<path>`` puts its folder first in the resolver of the file it is in).
+
+    folder : the file's folder.   resolver : the folders searched after it: its own ``<path>``
+        folders, the latest first, then the folders of the file that includes it as they were
+        at the include, and so on up to the main file's ``<path>`` folders.   chain : the real
+        paths of the files including it and its own, the main file first.   top : the main
+        scene's folder, searched last.
+    """
+
+    folder: Path
+    resolver: list[Path]
+    chain: list[str]
+    top: Path
+
+    def include_folders(self) -> list[Path]:
+        """Where a relative ``<include>`` of this file is looked for, in order."""
+        return list(dict.fromkeys([self.folder, *self.resolver, self.top]))
+
+    def included(self, path: Path) -> "_Scope":
+        """The scope of the file ``path`` that this file includes."""
+        return _Scope(path.parent, [self.folder, *self.resolver], [*self.chain, os.path.realpath(path)],
+                      self.top)
 
 
 class _Expansion:
     """Splices includes in, substitutes ``$name``, collects ``<path>`` folders and aliases."""
 
-    def __init__(self, top: Path):
+    def __init__(self):
         self.defaults: dict[str, str] = {}
-        self.search_folders: list[Path] = []
         self.aliases: list[Element] = []
         self.files = 1
-        self.top = top
+        self.paths = 0
+        self.substituted = 0  # characters $name substitution has added, in all files
 
     def substitute(self, element: Element) -> None:
-        for key, value in element.attrs.items():
-            if "$" in value:
-                value = _SUBSTITUTION.sub(lambda m: self._value_of(m, element), value)
-                # Defaults that repeat one another grow exponentially (a billion laughs made of
-                # $names): refuse a value past any plausible size as soon as one appears.
-                if len(value) > MAX_SUBSTITUTED:
-                    element.fail(f"attribute '{key}' is longer than {MAX_SUBSTITUTED} characters after "
-                                 "substituting $names")
-                element.attrs[key] = value
+        """``$name`` replaced in each attribute of ``element``. The size is counted as the value
+        is put together, so that a value past MAX_SUBSTITUTED (a default that repeats another
+        doubles at every step: a billion laughs made of $names) or a document past
+        MAX_SUBSTITUTED_TOTAL is refused before it is built."""
+        for key, text in element.attrs.items():
+            if "$" not in text:
+                continue
+            pieces, length, start = [], 0, 0
+            for match in _SUBSTITUTION.finditer(text):
+                value = self._value_of(match, element)
+                pieces += (text[start:match.start()], value)
+                length += match.start() - start + len(value)
+                self.substituted += len(value)
+                start = match.end()
+                self._check_size(element, key, length)
+            pieces.append(text[start:])
+            self._check_size(element, key, length + len(text) - start)
+            element.attrs[key] = "".join(pieces)
+
+    def _check_size(self, element: Element, key: str, length: int) -> None:
+        if length > MAX_SUBSTITUTED:
+            element.fail(f"attribute '{shown(key)}' is longer than {MAX_SUBSTITUTED} characters after "
+                         "substituting $names")
+        if self.substituted > MAX_SUBSTITUTED_TOTAL:
+            element.fail(f"attribute '{shown(key)}': substituting $names makes more than "
+                         f"{MAX_SUBSTITUTED_TOTAL} characters in the whole scene")
 
     def _value_of(self, match: re.Match, element: Element) -> str:
         name = match.group(1)
         if name not in self.defaults:
-            element.fail(f"undefined parameter ${name} (define it with <default name=\"{name}\" value=...> "
+            element.fail(f"undefined parameter ${shown(name)} (define it with <default name=... value=...> "
                          "before its first use)")
         return self.defaults[name]
 
-    def expand(self, parent: Element, folder: Path, chain: list[str], depth: int) -> list[Element]:
-        """``parent``'s children with includes spliced in and directives applied; ``folder``
-        is the folder of the file they are in, ``chain`` the files including it."""
+    def expand(self, parent: Element, scope: _Scope, depth: int) -> list[Element]:
+        """``parent``'s children with includes spliced in and directives applied; ``scope`` is
+        the file they are in."""
         out: list[Element] = []
         for child in parent.children:
             self.substitute(child)
@@ -270,13 +343,18 @@ class _Expansion:
             unexpected = sorted(set(child.attrs) - allowed)
             known = child.tag in OBJECT_TAGS or child.tag in PROPERTY_TAGS or child.tag in _ATTRIBUTES
             if unexpected and known:
-                child.fail(f"unexpected attribute '{unexpected[0]}'")
+                child.fail(f"unexpected attribute '{shown(unexpected[0])}'")
             if child.tag == "default":
                 self._no_children(child)
                 self.defaults.setdefault(child.attr("name"), child.attr("value"))
             elif child.tag == "path":
                 self._no_children(child)
-                self.search_folders.insert(0, folder / child.attr("value"))
+                if parent.tag != "scene":  # Mitsuba: "<path>: path can only be child of root"
+                    child.fail("a <path> belongs directly inside <scene>")
+                self.paths += 1
+                if self.paths > MAX_PATHS:
+                    child.fail(f"more than {MAX_PATHS} <path> folders in the scene")
+                scope.resolver.insert(0, self._path_folder(child, scope))
             elif child.tag == "alias":
                 self._no_children(child)
                 child.attr("id")
@@ -284,11 +362,11 @@ class _Expansion:
                 self.aliases.append(child)
             elif child.tag == "include":
                 self._no_children(child)
-                out.extend(self._include(child, folder, chain, depth))
+                out.extend(self._include(child, scope, depth))
             else:
-                if depth + len(chain) > MAX_NESTING:
+                if depth + len(scope.chain) > MAX_NESTING:
                     child.fail(f"elements nested more than {MAX_NESTING} deep (includes included)")
-                child.children = self.expand(child, folder, chain, depth + 1)
+                child.children = self.expand(child, scope, depth + 1)
                 out.append(child)
         return out
 
@@ -297,31 +375,65 @@ class _Expansion:
         if element.children:
             element.children[0].fail(f"<{element.tag}> takes no child elements")
 
-    def _include(self, include: Element, folder: Path, chain: list[str], depth: int) -> list[Element]:
+    @staticmethod
+    def _path_folder(path: Element, scope: _Scope) -> Path:
+        """The folder of a ``<path value>``: relative to its file's folder if it is there, else
+        looked up as that file's includes are (parser.cpp, ``TagType::Resource``); Mitsuba
+        refuses one that does not exist."""
+        value = path.attr("value")
+        try:
+            found = _first_found(Path(value), scope.include_folders(), Path.is_dir)
+        except (OSError, ValueError) as exc:  # a name too long for the file system, a NUL byte
+            path.fail(f"cannot look up the folder '{shown(value)}': {getattr(exc, 'strerror', None) or exc}")
+        if found is None:
+            path.fail(f"folder not found: '{shown(value)}'")
+        return found
+
+    def _include(self, include: Element, scope: _Scope, depth: int) -> list[Element]:
         name = include.attr("filename")
-        path = Path(name) if Path(name).is_absolute() else folder / name
-        real = os.path.realpath(path)
-        if real in chain:
-            include.fail(f"include cycle: {path} includes itself (through {len(chain)} file(s))")
-        if len(chain) >= MAX_INCLUDE_DEPTH:
-            include.fail(f"includes nested more than {MAX_INCLUDE_DEPTH} deep")
+        folders = scope.include_folders()
+        try:
+            path = _first_found(Path(name), folders)
+        except (OSError, ValueError) as exc:  # a name too long for the file system, a NUL byte
+            include.fail(f"cannot look up the included file '{shown(name)}': "
+                         f"{getattr(exc, 'strerror', None) or exc}")
+        if path is None:
+            looked = shown(", ".join(str(folder) for folder in folders), 4 * SHOWN_CHARACTERS)
+            include.fail(f"included file not found (or not a regular file): '{shown(name)}' "
+                         f"(looked in {looked})")
+        inner = scope.included(path)
+        if inner.chain[-1] in scope.chain:
+            include.fail(f"include cycle: {shown(str(path))} includes itself (through {len(scope.chain)} "
+                         "file(s))")
+        if len(scope.chain) > MAX_INCLUDE_DEPTH:  # chain: this file and the files including it
+            include.fail(f"more than {MAX_INCLUDE_DEPTH} includes nested in one another")
         self.files += 1
         if self.files > MAX_FILES:
             include.fail(f"more than {MAX_FILES} files included")
-        try:
-            found = path.is_file()
-        except (OSError, ValueError) as exc:  # a name too long for the file system, a NUL byte
-            include.fail(f"cannot look up the included file {str(path)[:80]}...: "
-                         f"{getattr(exc, 'strerror', None) or exc}")
-        if not found:
-            include.fail(f"included file not found (or not a regular file): {path}")
         root = _parse_file(str(path), str(path))
         if root.tag != "scene":
             root.fail("an included file's root element is <scene>")
         self.substitute(root)
         if "version" in root.attrs:
             _check_version(root)
-        return self.expand(root, path.parent, [*chain, real], depth)
+        return self.expand(root, inner, depth)
+
+
+def _first_found(name: Path, folders: list[Path], wanted=Path.is_file) -> Path | None:
+    """``name`` if absolute, else the first ``folder / name`` that is a file (or what ``wanted``
+    accepts), or None: what Mitsuba's ``FileResolver::resolve`` finds (src/core/fresolver.cpp).
+    Raises OSError or ValueError when the name cannot be looked up at all (too long for the file
+    system, a NUL byte) and is found nowhere."""
+    error: OSError | ValueError | None = None
+    for candidate in [name] if name.is_absolute() else [folder / name for folder in folders]:
+        try:
+            if wanted(candidate):
+                return candidate
+        except (OSError, ValueError) as exc:
+            error = error or exc
+    if error is not None:
+        raise error
+    return None
 
 
 def _collect_ids(root: Element, aliases: list[Element]) -> dict[str, Element]:
@@ -336,14 +448,14 @@ def _collect_ids(root: Element, aliases: list[Element]) -> dict[str, Element]:
             if ident is None:
                 continue
             if ident in ids:
-                element.fail(f"duplicate id '{ident}' (first at {ids[ident].where})")
+                element.fail(f"duplicate id '{shown(ident)}' (first at {ids[ident].where})")
             ids[ident] = element
     for alias in aliases:
         source, name = alias.attrs["id"], alias.attrs["as"]
         if source not in ids:
-            alias.fail(f"no object has id '{source}'")
+            alias.fail(f"no object has id '{shown(source)}'")
         if name in ids:
-            alias.fail(f"id '{name}' is taken (at {ids[name].where})")
+            alias.fail(f"id '{shown(name)}' is taken (at {ids[name].where})")
         ids[name] = ids[source]
     return ids
 
@@ -356,19 +468,19 @@ def number(element: Element, text: str, what: str) -> float:
     """A finite number written as Mitsuba accepts it (surrounding spaces allowed)."""
     token = text.strip()
     if _NOT_FINITE.fullmatch(token):
-        element.fail(f"{what}: expected a finite number, got '{token}'")
+        element.fail(f"{what}: expected a finite number, got '{shown(token)}'")
     if not _NUMBER.fullmatch(token):
-        element.fail(f"{what}: expected a number, got '{_short(token)}'")
+        element.fail(f"{what}: expected a number, got '{shown(token)}'")
     value = float(token)
     if not math.isfinite(value):
-        element.fail(f"{what}: '{_short(token)}' is not a finite number")
+        element.fail(f"{what}: '{shown(token)}' is not a finite number")
     return value
 
 
 def integer(element: Element, text: str, what: str) -> int:
     token = text.strip()
     if not _INTEGER.fullmatch(token) or len(token) > 30:
-        element.fail(f"{what}: expected a whole number, got '{_short(token)}'")
+        element.fail(f"{what}: expected a whole number, got '{shown(token)}'")
     return int(token)
 
 
@@ -380,7 +492,7 @@ def numbers(element: Element, text: str, what: str) -> list[float]:
 def boolean(element: Element, text: str, what: str) -> bool:
     token = text.strip().lower()
     if token not in ("true", "false"):
-        element.fail(f"{what}: expected true or false, got '{_short(text)}'")
+        element.fail(f"{what}: expected true or false, got '{shown(text)}'")
     return token == "true"
 
 
@@ -498,6 +610,3 @@ def _vector_attr(op: Element, name: str) -> np.ndarray:
         op.fail(f"{name}: expected 3 numbers, got {len(values)}")
     return np.array(values, dtype=np.float64)
 
-
-def _short(text: str) -> str:
-    return text if len(text) <= 40 else text[:37] + "..."

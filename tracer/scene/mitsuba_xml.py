@@ -25,7 +25,7 @@ import numpy as np
 
 from .. import materials
 from ..camera import Camera
-from ..errors import InputError, one_line
+from ..errors import InputError, one_line, shown
 from ..materials import conductor, plastic
 from ..record import MAX_SAMPLE_INDEX
 from . import spectrum
@@ -54,10 +54,24 @@ MIN_ALPHA = 1e-4  # Mitsuba's microfacet distributions clamp alpha to at least t
 # A disk is a fan of this many triangles: its area is (N/2) sin(2 pi/N) r^2, within 8e-5 of
 # pi r^2 (the issue asks for 0.01%).
 DISK_SEGMENTS = 288
-# A camera transform whose rotation part R has |R^T R - I| above this is not rigid.
-RIGID_TOLERANCE = 1e-5
+# A camera transform whose linear part M has an entry of M M^T - I beyond this scales or shears:
+# Mitsuba 3.9.1's own test (Transform::has_scale in include/mitsuba/core/transform.h, which the
+# perspective sensor's constructor applies, src/sensors/perspective.cpp), so tracer refuses what
+# Mitsuba refuses and takes every camera it takes. A rotation printed to 6 significant digits is
+# about 1e-6 from rigid, to 5 digits about 1e-5 (the 1e-5 tracer had refused those). Mitsuba casts
+# rays along M d as given; tracer's camera is the rigid frame of M's forward and up columns, so
+# the image centre is Mitsuba's and a ray elsewhere is off by about the deviation in radians: a
+# pixel (9e-4 radians at 768 pixels across 40 degrees) at this limit, 1/1000 of one at 6 digits.
+RIGID_TOLERANCE = 1e-3
 
 _REFLECTANCES = ("reflectance", "diffuse_reflectance", "specular_reflectance")
+_READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided"})
+_DIELECTRICS = frozenset({"dielectric", "roughdielectric", "thindielectric"})
+# Mitsuba 3.9.1's BSDF plugins (src/bsdfs/*.cpp): an unused declaration of one that tracer does
+# not read is accepted unread (it changes no image); any other type is unknown to Mitsuba too.
+_MITSUBA_BSDFS = _READ_BSDFS | _DIELECTRICS | frozenset({
+    "blendbsdf", "bumpmap", "circular", "hair", "mask", "measured", "measured_polarized", "normalmap",
+    "null", "polarizer", "pplastic", "principled", "principledthin", "retarder"})
 _UNSUPPORTED_ANYWHERE = {
     "texture": "textures are not supported (tracer reads constant colours: give an <rgb>, <float> or "
                "<spectrum>)",
@@ -98,8 +112,8 @@ class _Plugin:
             if child.tag in PROPERTY_TAGS:
                 name = child.attr("name")
                 if name in self.props:
-                    child.fail(f"property '{name}' is given twice (first at line {self.props[name].line})",
-                               element)
+                    child.fail(f"property '{shown(name)}' is given twice (first at line "
+                               f"{self.props[name].line})", element)
                 self.props[name] = child
             elif child.tag == "ref":
                 self.objects.append((document.resolve(child), child))
@@ -199,7 +213,7 @@ class _Plugin:
         for token in pairs:
             parts = token.split(":")
             if len(parts) != 2:
-                element.fail(f"{name}: expected wavelength:value pairs, got '{token[:40]}'", self.element)
+                element.fail(f"{name}: expected wavelength:value pairs, got '{shown(token)}'", self.element)
             wavelengths.append(number(element, parts[0], name))
             values.append(number(element, parts[1], name))
         if len(wavelengths) < 2:
@@ -209,9 +223,9 @@ class _Plugin:
         rgb = spectrum.tabulated_rgb(np.array(wavelengths), np.array(values), emitter=kind == "emitter")
         clamped = np.clip(rgb, 0.0, 1.0 if kind == "reflectance" else None)
         if not np.array_equal(clamped, rgb):
-            shown = ", ".join(f"{c:.4g}" for c in rgb)
-            self.notes.append(f"{element.where}: {name}'s spectrum is ({shown}) in sRGB, clamped into range "
-                              "as Mitsuba clamps it")
+            channels = ", ".join(f"{c:.4g}" for c in rgb)
+            self.notes.append(f"{element.where}: {name}'s spectrum is ({channels}) in sRGB, clamped into "
+                              "range as Mitsuba clamps it")
         return clamped
 
     def transform(self, name: str = "to_world") -> np.ndarray | None:
@@ -227,11 +241,12 @@ class _Plugin:
     def done(self) -> None:
         for name, element in self.props.items():
             if name not in self.used:
-                element.fail(f"{self.type} has no property '{name}' that tracer reads", self.element)
+                element.fail(f"{shown(self.type)} has no property '{shown(name)}' that tracer reads",
+                             self.element)
         for obj, written in self.objects:
             if id(written) not in self.taken:
                 written.fail(f"a <{obj.tag}> is not expected inside <{self.element.tag} "
-                             f"type=\"{self.type}\">", self.element)
+                             f"type=\"{shown(self.type)}\">", self.element)
 
 
 class _SceneReader:
@@ -282,9 +297,8 @@ class _SceneReader:
             else:
                 child.fail("not expected directly inside <scene>")
         # Declarations nothing refers to are still checked, as Mitsuba builds them too.
-        for element in declared_bsdfs:
-            if not any(key[0] == id(element) for key in self.rows):
-                _ = self.bsdf_triple(self.plugin(element))
+        used = {key[0] for key in self.rows}
+        self.unused_bsdfs([element for element in declared_bsdfs if id(element) not in used])
         for element in declared_emitters:
             if id(element) not in self.emitter_owner:
                 self.area_radiance(element)
@@ -302,7 +316,7 @@ class _SceneReader:
         if p.type != "perspective":
             hint = {"thinlens": " (depth of field: use a perspective sensor)",
                     "orthographic": " (tracer's camera is a pinhole)"}.get(p.type, "")
-            p.fail(f"sensor '{p.type}' is not supported{hint}; tracer reads perspective")
+            p.fail(f"sensor '{shown(p.type)}' is not supported{hint}; tracer reads perspective")
         width, height = FILM_SIZE
         films = p.nested("film")
         if len(films) > 1:
@@ -320,6 +334,10 @@ class _SceneReader:
                 self.notes.append(f"{name} {value:g}")
         for name in ("shutter_open", "shutter_close"):  # no motion in a tracer scene: no effect
             p.float(name, 0.0, lo=0.0)
+        # Mitsuba's projective cameras read the focal distance (ProjectiveCamera in
+        # src/render/sensor.cpp); a pinhole's image does not depend on it. (aperture_radius is
+        # the thin lens's: Mitsuba refuses it here too, as an unread property.)
+        p.float("focus_distance", 0.0)
         for name in ("principal_point_offset_x", "principal_point_offset_y"):
             if p.float(name, 0.0) != 0.0:
                 p.props[name].fail("an off-centre principal point is not supported", element)
@@ -334,9 +352,9 @@ class _SceneReader:
         matrix = p.transform()
         matrix = np.eye(4) if matrix is None else matrix
         linear = matrix[:3, :3]
-        if np.max(np.abs(linear.T @ linear - np.eye(3))) > RIGID_TOLERANCE:
-            p.props["to_world"].fail("the camera's to_world scales or shears (tracer's camera is a rotation, "
-                                     "with at most a mirror): remove the scale", element)
+        if np.max(np.abs(linear @ linear.T - np.eye(3))) > RIGID_TOLERANCE:
+            p.props["to_world"].fail("the camera's to_world scales or shears (Mitsuba refuses scale factors "
+                                     "in a camera's transform too): remove the scale", element)
         origin = matrix[:3, 3]
         if np.max(np.abs(origin)) > MAX_COORDINATE:
             p.fail(f"the camera is beyond the coordinate range +-{MAX_COORDINATE:g}")
@@ -366,8 +384,8 @@ class _SceneReader:
             p.props["fov"].fail("fov: expected a number < 180", p.element)
         axis = (p.string("fov_axis", "x") or "x").lower()
         if axis not in ("x", "y", "diagonal", "smaller", "larger"):
-            p.props["fov_axis"].fail(f"fov_axis: expected x, y, diagonal, smaller or larger; got '{axis}'",
-                                     p.element)
+            p.props["fov_axis"].fail(f"fov_axis: expected x, y, diagonal, smaller or larger; got "
+                                     f"'{shown(axis)}'", p.element)
         if axis == "smaller":
             axis = "x" if w < h else "y"
         elif axis == "larger":
@@ -378,7 +396,7 @@ class _SceneReader:
     def film(self, element: Element, written: Element) -> tuple[int, int]:
         p = self.plugin(element)
         if p.type != "hdrfilm":
-            p.fail(f"film '{p.type}' is not supported; tracer reads hdrfilm (and writes its own EXR)")
+            p.fail(f"film '{shown(p.type)}' is not supported; tracer reads hdrfilm (and writes its own EXR)")
         width = p.integer("width", FILM_SIZE[0], 1, MAX_SIDE)
         height = p.integer("height", FILM_SIZE[1], 1, MAX_SIDE)
         crop = {name: p.integer(name, default, 0, MAX_SIDE) for name, default in
@@ -388,17 +406,18 @@ class _SceneReader:
         for name in ("pixel_format", "component_format", "file_format"):
             value = p.string(name, None)
             if value is not None:
-                self.notes.append(f"film {name} \"{value}\"")
+                self.notes.append(f"film {name} \"{shown(value)}\"")
         for name in ("sample_border", "compensate"):
             if p.boolean(name, False):
                 self.notes.append(f"film {name}")
+        p.used.add("banner")  # Mitsuba 3 reads it, of any type, and writes no banner (hdrfilm.cpp)
         filters = p.nested("rfilter")
         for rfilter, _ in filters:
             f = self.plugin(rfilter)
             f.used.update(f.props)  # its parameters shape the filter tracer does not use
             f.done()
             if f.type != "box":
-                self.notes.append(f"<rfilter type=\"{f.type}\">")
+                self.notes.append(f"<rfilter type=\"{shown(f.type)}\">")
         p.done()
         return width, height
 
@@ -407,7 +426,7 @@ class _SceneReader:
         if p.has("sample_count"):
             self.render["spp"] = p.integer("sample_count", 4, 1, MAX_SAMPLE_INDEX)
         if p.type != "independent":
-            self.notes.append(f"<sampler type=\"{p.type}\"> (tracer uses its --sampler)")
+            self.notes.append(f"<sampler type=\"{shown(p.type)}\"> (tracer uses its --sampler)")
         if p.has("seed"):
             seed = p.integer("seed", 0, -(2**63), 2**64)
             self.notes.append(f"sampler seed {seed} (tracer uses its --seed)")
@@ -418,7 +437,7 @@ class _SceneReader:
         p = self.plugin(element)
         p.used.update(p.props)
         p.taken.update(id(written) for _, written in p.objects)
-        self.notes.append(f"<integrator type=\"{p.type}\">")
+        self.notes.append(f"<integrator type=\"{shown(p.type)}\">")
 
     # -- shapes ----------------------------------------------------------------------------
 
@@ -428,8 +447,8 @@ class _SceneReader:
         if kind not in ("obj", "ply", "rectangle", "cube", "sphere", "disk"):
             hints = {"serialized": " (convert it to PLY, e.g. with Mitsuba's Python API)",
                      "instance": " (instancing)", "shapegroup": " (instancing)"}
-            p.fail(f"shape '{kind}' is not supported{hints.get(kind, '')}; tracer reads obj, ply, rectangle, "
-                   "cube, sphere and disk")
+            p.fail(f"shape '{shown(kind)}' is not supported{hints.get(kind, '')}; tracer reads obj, ply, "
+                   "rectangle, cube, sphere and disk")
         matrix = p.transform()
         matrix = np.eye(4) if matrix is None else matrix
         if np.max(np.abs(matrix)) > MAX_COORDINATE:
@@ -501,7 +520,7 @@ class _SceneReader:
             p.fail("missing property 'filename'")
         face_normals = p.boolean("face_normals", False)
         p.boolean("flip_tex_coords", True)  # texture coordinates: nothing tracer reads
-        path = self.document.find_file(name, p.element)
+        path = self.document.find_file(name)
         try:
             mesh = read_mesh_file(path)
         except MeshError as exc:
@@ -540,8 +559,8 @@ class _SceneReader:
         if emitters:
             emitter, written = emitters[0]
             if emitter.attrs.get("type") != "area":
-                written.fail(f"emitter '{emitter.attrs.get('type', '')}' inside a shape: a shape's emitter "
-                             "is 'area'", p.element)
+                written.fail(f"emitter '{shown(emitter.attrs.get('type', ''))}' inside a shape: a shape's "
+                             "emitter is 'area'", p.element)
             owner = self.emitter_owner.setdefault(id(emitter), p.element)
             if owner is not p.element:
                 written.fail(f"this area emitter already belongs to the shape at {owner.where} (an emitter "
@@ -571,7 +590,8 @@ class _SceneReader:
             why = {"envmap": "environment lights", "constant": "environment lights",
                    "directional": "directional lights", "spot": "spot lights",
                    "projector": "projector lights"}.get(p.type)
-            p.fail(f"emitter '{p.type}' is not supported" + (f" ({why} are not in tracer)" if why else "")
+            p.fail(f"emitter '{shown(p.type)}' is not supported"
+                   + (f" ({why} are not in tracer)" if why else "")
                    + "; tracer reads point emitters and area emitters on shapes")
         intensity = p.color("intensity", 1.0, "emitter", hi=MAX_RADIANCE)
         position = p.point("position", None)
@@ -594,6 +614,46 @@ class _SceneReader:
             self.default_row = self.add_material(self.unique("default"), "diffuse", {"reflectance": 0.5},
                                                  False)
         return self.default_row
+
+    def unused_bsdfs(self, bsdfs: list[Element]) -> None:
+        """Check BSDFs no shape uses, as Mitsuba checks them when it builds them: one that
+        tracer reads is read (its values must be what Mitsuba takes), a twosided's one or two
+        nested BSDFs each so (Mitsuba's twosided refuses a dielectric inside,
+        src/bsdfs/twosided.cpp); another of Mitsuba's BSDFs is accepted unread, an unknown type
+        refused. Depth first without recursion, as references may chain twosided BSDFs as long
+        as the scene is; a reference cycle is refused, as Mitsuba refuses it (parser.cpp,
+        ``check_cycles``)."""
+        checked: set[int] = set()
+        inside: set[int] = set()  # the twosided BSDFs whose nested ones are being checked
+        # ("enter", a BSDF, the element naming it) and ("leave", a twosided, None), last first
+        work: list[tuple[str, Element, Element | None]] = [("enter", b, b) for b in reversed(bsdfs)]
+        while work:
+            step, bsdf, written = work.pop()
+            if step == "leave":
+                inside.discard(id(bsdf))
+                checked.add(id(bsdf))
+                continue
+            if id(bsdf) in inside:
+                written.fail("a circular reference: this BSDF would be nested in itself")
+            if id(bsdf) in checked:
+                continue
+            p = self.plugin(bsdf)
+            if p.type != "twosided":
+                if p.type in _READ_BSDFS or p.type not in _MITSUBA_BSDFS:
+                    self.bsdf_triple(p)
+                checked.add(id(bsdf))
+                continue
+            nested = p.nested("bsdf")
+            if not nested or len(nested) > 2:
+                p.fail(f"twosided needs one or two nested BSDFs, not {len(nested)}")
+            for inner, naming in nested:
+                if inner.attrs.get("type") in _DIELECTRICS:
+                    naming.fail("a dielectric inside a twosided (Mitsuba nests only BSDFs without "
+                                "transmission)", bsdf)
+            p.done()
+            inside.add(id(bsdf))
+            work.append(("leave", bsdf, None))
+            work.extend(("enter", inner, naming) for inner, naming in reversed(nested))
 
     def material(self, bsdf: Element, written: Element) -> int:
         twosided = bsdf.attrs.get("type") == "twosided"
@@ -635,10 +695,8 @@ class _SceneReader:
     def bsdf_triple(self, p: _Plugin) -> tuple[str, dict[str, object]]:
         """tracer's material type and parameters for the Mitsuba BSDF ``p`` (not twosided)."""
         kind = p.type
-        if kind in ("dielectric", "roughdielectric", "thindielectric"):
+        if kind in _DIELECTRICS:
             p.fail(_DIELECTRIC.format(kind=kind))
-        if kind == "twosided":
-            p.fail("a twosided here is not supported (only as a shape's bsdf)")
         if kind == "diffuse":
             values: dict[str, object] = {"reflectance": p.color("reflectance", 0.5, "reflectance", hi=1.0)}
         elif kind in ("conductor", "roughconductor"):
@@ -656,7 +714,7 @@ class _SceneReader:
             if kind == "roughplastic":
                 values.update(self.roughness(p))
         else:
-            p.fail(f"bsdf '{kind}' is not supported; tracer reads diffuse, conductor, roughconductor, "
+            p.fail(f"bsdf '{shown(kind)}' is not supported; tracer reads diffuse, conductor, roughconductor, "
                    "plastic, roughplastic and twosided")
         p.done()
         return kind, values
@@ -673,10 +731,11 @@ class _SceneReader:
         from ..materials.presets import CONDUCTORS
 
         if name not in CONDUCTORS:
-            close = [n for n in CONDUCTORS if n.lower() == name.lower()]
+            folded = name.lower()  # once: a 60 MB name folded for every preset took seconds
+            close = [n for n in CONDUCTORS if n.lower() == folded]
             hint = f" (names are case-sensitive: '{close[0]}')" if close else ""
-            p.props["material"].fail(f"unknown conductor material '{name}'{hint}; Mitsuba's names: none, "
-                                     f"{', '.join(sorted(CONDUCTORS, key=str.lower))}", p.element)
+            p.props["material"].fail(f"unknown conductor material '{shown(name)}'{hint}; Mitsuba's names: "
+                                     f"none, {', '.join(sorted(CONDUCTORS, key=str.lower))}", p.element)
         eta, k = CONDUCTORS[name]
         return np.array(eta, dtype=np.float64), np.array(k, dtype=np.float64)
 
@@ -691,7 +750,8 @@ class _SceneReader:
         if element.tag == "string":
             key = text.strip().lower()
             if key not in IORS:
-                element.fail(f"unknown IOR name '{text}' (Mitsuba's names: {', '.join(IORS)})", p.element)
+                element.fail(f"unknown IOR name '{shown(text)}' (Mitsuba's names: {', '.join(IORS)})",
+                             p.element)
             return IORS[key]
         value = number(element, text, name)
         p._check(element, value, plastic.MIN_IOR, plastic.MAX_IOR)
@@ -702,8 +762,8 @@ class _SceneReader:
         least MIN_ALPHA as Mitsuba's distributions clamp it."""
         distribution = (p.string("distribution", "beckmann") or "").lower()
         if distribution not in ("beckmann", "ggx"):
-            p.props["distribution"].fail(f"distribution: expected beckmann or ggx, got '{distribution}'",
-                                         p.element)
+            p.props["distribution"].fail("distribution: expected beckmann or ggx, got "
+                                         f"'{shown(distribution)}'", p.element)
         if p.has("alpha_u") or p.has("alpha_v"):
             if p.has("alpha"):
                 p.fail("give alpha or alpha_u and alpha_v, not both")
