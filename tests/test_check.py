@@ -26,6 +26,7 @@ from scipy import stats
 from tracer import estimators
 from tracer.cli import main
 from tracer.errors import InputError
+from tracer.scene import load_scene
 from tracer.study import check, statistics
 from tracer.study.check import format_table, load_baseline, run_check, save_baseline
 
@@ -629,3 +630,23 @@ def test_a_baseline_or_scene_that_is_not_a_regular_file_is_refused_at_once(where
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and str(named) in lines[0] and "not a regular file" in lines[0], done.stderr
+
+
+def test_a_mesh_or_include_that_is_not_a_regular_file_is_refused(tmp_path):
+    """A FIFO named as a TOML mesh file, a Mitsuba scene file or an include is refused with one
+    line naming it (opening it would block until something wrote to it)."""
+    import os
+
+    fifo = tmp_path / "fifo.ply"
+    os.mkfifo(fifo)
+    toml = tmp_path / "s.toml"
+    toml.write_text('[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 40\n'
+                    '[[shapes]]\ntype = "mesh"\nfile = "fifo.ply"\n')
+    xml_fifo = tmp_path / "fifo.xml"
+    os.mkfifo(xml_fifo)
+    include = tmp_path / "inc.xml"
+    include.write_text('<scene version="3.0.0"><include filename="fifo.xml"/></scene>')
+    for path, words in ((toml, "not a regular file"), (xml_fifo, "not a regular file"), (include, "fifo.xml")):
+        with pytest.raises(InputError) as info:
+            load_scene(path)
+        assert words in str(info.value) and "\n" not in str(info.value), str(info.value)

@@ -15,14 +15,17 @@ import stat
 from .errors import InputError
 
 
-def read_regular_file(path: str | os.PathLike[str], limit: int, what: str, missing: str | None = None) -> bytes:
+def read_regular_file(path: str | os.PathLike[str], limit: int, what: str, missing: str | None = None,
+                      label: str | None = None) -> bytes:
     """The bytes of the regular file ``path``, at most ``limit`` of them. ``what`` names the
     kind of file in messages (``scene file``); ``missing`` is the message for a file that does
-    not exist (default ``no such WHAT``). Raises InputError naming ``path``."""
-    name = os.fspath(path)
+    not exist (default ``no such WHAT``). Raises InputError naming ``label`` (default: the
+    path)."""
+    path = os.fspath(path)
+    name = label or path
     try:
         # O_NONBLOCK: opening a FIFO without a writer returns at once instead of waiting.
-        fd = os.open(name, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
         raise InputError(missing or f"no such {what}", name) from None
     except IsADirectoryError:
@@ -39,12 +42,22 @@ def read_regular_file(path: str | os.PathLike[str], limit: int, what: str, missi
             if info.st_size > limit:
                 raise InputError(f"larger than {_size(limit)}: not a {what}", name)
             os.set_blocking(fd, True)
-            data = fh.read(limit + 1)
+            data = _read_at_most(fh, limit + 1)
         except OSError as exc:
             raise InputError(f"cannot read: {exc.strerror or exc}", name) from None
     if len(data) > limit:  # it grew while being read
         raise InputError(f"larger than {_size(limit)}: not a {what}", name)
     return data
+
+
+def _read_at_most(fh, limit: int) -> bytes:
+    """The first ``limit`` bytes of ``fh``, read a megabyte at a time: ``fh.read(limit)`` would
+    take ``limit`` bytes of memory for any file, however small."""
+    chunks, size = [], 0
+    while size < limit and (chunk := fh.read(min(1 << 20, limit - size))):
+        chunks.append(chunk)
+        size += len(chunk)
+    return b"".join(chunks)
 
 
 def _size(limit: int) -> str:

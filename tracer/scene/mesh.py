@@ -71,7 +71,10 @@ def read_mesh_file(mesh_path: Path) -> Mesh:
     except OSError as exc:  # a name too long for the file system, and the like
         raise MeshError(f"cannot look up mesh {str(mesh_path)[:80]}...: {exc.strerror}") from None
     if not found:
-        raise MeshError(f"mesh file not found: {mesh_path}")
+        # A FIFO or a device would block or never end in trimesh's reader: refused, and named.
+        there = mesh_path.exists()
+        raise MeshError(f"mesh file is not a regular file (a FIFO, socket, device or folder): {mesh_path}"
+                        if there else f"mesh file not found: {mesh_path}")
     try:
         vertices, faces, normals = _load(trimesh, mesh_path)
     except MeshError:

@@ -43,6 +43,7 @@ from xml.parsers import expat
 import numpy as np
 
 from ..errors import SHOWN_CHARACTERS, InputError, shown
+from ..inputfiles import read_regular_file
 
 MAX_FILE_BYTES = 64 << 20  # far beyond any scene file (meshes live in their own files)
 # Includes inside includes: the main file may include a file that includes another, and so on,
@@ -193,17 +194,7 @@ def _check_version(scene: Element) -> None:
 
 def _parse_file(path: str, label: str) -> Element:
     """The element tree of one XML file; ``label`` names it in messages."""
-    try:
-        with open(path, "rb") as fh:
-            data = _read_at_most(fh, MAX_FILE_BYTES + 1)
-    except FileNotFoundError:
-        raise InputError("no such scene file", label) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, not a scene file", label) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", label) from None
-    if len(data) > MAX_FILE_BYTES:
-        raise InputError(f"larger than {MAX_FILE_BYTES >> 20} MiB: not a scene file", label)
+    data = read_regular_file(path, MAX_FILE_BYTES, "scene file", label=label)
 
     parser = expat.ParserCreate()
     stack: list[Element] = []
@@ -244,16 +235,6 @@ def _parse_file(path: str, label: str) -> Element:
     if not roots:
         raise InputError("no XML element", label)
     return roots[0]
-
-
-def _read_at_most(fh, limit: int) -> bytes:
-    """The first ``limit`` bytes of ``fh``, read a megabyte at a time: ``fh.read(limit)`` would
-    take ``limit`` bytes of memory for any file, however small."""
-    chunks, size = [], 0
-    while size < limit and (chunk := fh.read(min(1 << 20, limit - size))):
-        chunks.append(chunk)
-        size += len(chunk)
-    return b"".join(chunks)
 
 
 @dataclass
