@@ -26,18 +26,21 @@ input files (nor "command line"); ``nan-samples``, an accepted render whose summ
 samples came out NaN (set to 0 and counted, as the README promises); ``stderr-noise``, a
 successful ``--quiet`` run that printed something else on stderr (a Python warning, say).
 
-Three families of cases, each a folder holding its inputs:
+Four families of cases, each a folder holding its inputs:
 
 - ``scene``: a shipped scene (``scenes/`` and ``tracer/study/cases/``) parsed and mutated
   structure-aware (deleted, duplicated and unknown keys, swapped types, special numbers, wrong
   vector lengths, long and unicode strings, deep nesting, unknown materials, degenerate
-  cameras, zero-area and extreme geometry, very bright lights, damaged or missing meshes,
+  cameras, zero-area and extreme geometry, very bright lights, damaged or missing meshes, meshes
+  that are FIFOs, devices or folders, material values at and beyond the ends of their ranges,
   command-line options), written back as TOML, sometimes also damaged byte by byte. Checks:
   ``tracer.load_scene`` on the file and on the same tables as a dict (in-process), and
   ``tracer render --width 8 --height 8 --spp 2`` (subprocess).
 - ``exr``: a render EXR made by tracer, damaged through OpenImageIO (``tracer:*`` header
   attributes, NaN/inf/negative/huge pixel values, sample-count channels, dropped, renamed or
-  retyped channels, other sizes, tiles, compression) or byte by byte (truncated, flipped,
+  retyped channels, other sizes, tiles, compression, header fields that contradict each other or
+  the pixels: spp against the counts, light samples past the bound, counts past float32) or byte
+  by byte (truncated, flipped,
   zeroed). Checks: ``tracer.read_image`` (in-process), then one of ``tracer merge``,
   ``tracer reference --resume``, ``tracer compare --reference`` and ``tracer check`` (with the
   EXR as the baseline entry's reference), in turn.
@@ -45,7 +48,12 @@ Three families of cases, each a folder holding its inputs:
   seeds, an 8 x 8 reference) mutated field by field or damaged as text. Checks:
   ``tracer.study.check.load_baseline`` (in-process) and ``tracer check --baseline`` (sometimes
   with ``--update``). ``tracer check`` renders every valid entry, so mutations keep spp, seeds
-  and sample counts either invalid or small: a valid but huge baseline is slow, not broken.
+  and sample counts either invalid or small: a valid but huge baseline is slow, not broken. The
+  baseline, or its entry's scene, is sometimes a FIFO.
+- ``xml``: a small Mitsuba 3 scene with hostile changes (``benchmarks/fuzz_xml.py``: growing
+  ``$name`` substitutions, include chains, diamonds and cycles, FIFOs and devices, huge strings
+  in every slot, polygon meshes, camera matrices near Mitsuba's rigidity tolerance, BSDF
+  reference graphs, material extremes). Checks: ``tracer.load_scene`` and ``tracer render``.
 
 How they run: CLI checks in subprocesses (``python -m tracer ...``, cwd = the case folder,
 address space limited to ``--memory-gib``), ``--jobs`` at a time; in-process checks in one
@@ -63,7 +71,7 @@ signatures (exception type and tracer function, or the message with its particul
 ``DIR/outcomes.jsonl`` every outcome, ``DIR/summary.txt`` the printed report.
 
 Usage:
-    python benchmarks/fuzz.py [--seed S] [--scenes N] [--exrs N] [--baselines N]
+    python benchmarks/fuzz.py [--seed S] [--scenes N] [--exrs N] [--baselines N] [--xmls N]
                               [--keep DIR] [--jobs 2] [--timeout 120]
 """
 
@@ -97,6 +105,7 @@ SCENE_DIRS = (ROOT / "tracer" / "scenes", ROOT / "tracer" / "study" / "cases")
 SHIPPED_MESH_DIR = ROOT / "tracer" / "scenes" / "meshes"
 BASELINE_FILE = ROOT / "renders" / "noise_baseline.json"
 
+FAMILIES = ("scene", "exr", "baseline", "xml")
 KINDS = ("ok", "refused", "traceback", "crash", "hang", "nonfinite", "multiline")
 FAILURE_KINDS = ("traceback", "crash", "hang", "nonfinite", "multiline")
 SEVERITY = {"crash": 0, "hang": 1, "nonfinite": 2, "traceback": 3, "multiline": 4}
@@ -1260,13 +1269,54 @@ def mutate_python_types(rng, doc, ctx):
 # Each mutation with its weight. About half of them keep the scene valid but extreme (boundary
 # values, zero-area and bright lights, scaled scenes, near-degenerate cameras, odd meshes), so
 # that renders, not only the reader, meet hostile numbers.
+def mutate_material_extreme(rng, doc, ctx):
+    """A material parameter at, just inside or beyond an end of its range, or at a value that
+    divided by zero or overflowed before the ranges were bounded (issue 38.7)."""
+    extremes = {"int_ior": ("plastic", (0.01, 100.0, 0.0099, 100.01, 1e-300, 1e-160, 5e-324)),
+                "ext_ior": ("roughplastic", (0.01, 100.0, 1e-300, 1e300)),
+                "eta": ("conductor", (0.0, 1000.0, 1000.5, 1e300)),
+                "k": ("roughconductor", (0.0, 1000.0, 1e300)),
+                "alpha": ("roughconductor", (1e-6, 10.0, 9.9e-7, 1e-300, 10.01))}
+    name = rng.choice(sorted(extremes))
+    kind, values = extremes[name]
+    value = rng.choice(values)
+    material = {"type": kind, name: value if name in ("int_ior", "ext_ior", "alpha") else [value] * 3}
+    if kind == "roughconductor":
+        material.setdefault("alpha", 0.1)
+        material["reflectance"] = [0.5, 0.5, 0.5]
+    if name == "eta" and rng.random() < 0.5:
+        material["k"] = [0.0, 0.0, 0.0]  # eta = k = 0 divided by zero in the Fresnel term
+    doc.setdefault("materials", {})["fuzz_extreme"] = material
+    shapes = _shapes(doc)
+    if shapes:
+        rng.choice(shapes)["material"] = "fuzz_extreme"
+    return f"material {kind} {name} = {value}{' (k = 0)' if material.get('k') == [0.0] * 3 else ''}"
+
+
+def mutate_special_file(rng, doc, ctx):
+    """A mesh the scene reads is a FIFO, /dev/zero or a folder (opening a FIFO blocks until
+    something writes to it; a device never ends)."""
+    shapes = _mesh_shapes(doc, rng)
+    if not shapes:
+        return None
+    shape = rng.choice(shapes)
+    what = rng.choice(("fifo", "device", "folder"))
+    name = f"special_{what}.ply"
+    target = ctx.folder / name
+    if not target.exists() and not target.is_symlink():
+        {"fifo": lambda: os.mkfifo(target), "device": lambda: os.symlink("/dev/zero", target),
+         "folder": lambda: target.mkdir()}[what]()
+    shape["file"] = name
+    return f"mesh file is a {what}"
+
+
 SCENE_MUTATIONS: list[tuple[Callable, float]] = [
     (mutate_delete_key, 2), (mutate_duplicate, 2), (mutate_swap_type, 2), (mutate_special_number, 4),
     (mutate_boundary_value, 6), (mutate_vector_length, 1), (mutate_long_string, 1), (mutate_odd_text, 2),
     (mutate_deep_nesting, 1), (mutate_unknown_key, 1), (mutate_unknown_material, 1), (mutate_fov, 2),
     (mutate_degenerate_camera, 3), (mutate_zero_area, 3), (mutate_bright_light, 5), (mutate_scale_scene, 3),
     (mutate_sphere, 2), (mutate_render_table, 1), (mutate_many_shapes, 0.5), (mutate_empty, 1),
-    (mutate_mesh_reference, 1), (mutate_mesh_damage, 3),
+    (mutate_mesh_reference, 1), (mutate_mesh_damage, 3), (mutate_material_extreme, 3), (mutate_special_file, 1),
 ]
 
 
@@ -1388,7 +1438,8 @@ def make_scene_case(seed: int, index: int, root: Path) -> Case:
         case.mutations.append(f"text: {description}")
     (folder / "scene.toml").write_bytes(text)
     (folder / "a_dir.exr").mkdir()
-    mesh_names = tuple(sorted({p.name for p in folder.rglob("*") if p.is_file() and p.suffix != ".toml"}))
+    mesh_names = tuple(sorted({p.name for p in folder.rglob("*") if p.is_file() and p.suffix != ".toml"}
+                              | {f"special_{what}.ply" for what in ("fifo", "device", "folder")}))
     inputs = ("scene.toml",) + mesh_names + ("<dict>",)
     scene_file = str(folder / "scene.toml")
     case.checks.append(Check("api-load-file", probe=("load_scene", (scene_file,)), inputs=inputs))
@@ -1500,8 +1551,10 @@ def damage_exr(rng: random.Random, raw: RawExr) -> str:
 
     how = rng.choice(("attribute", "attribute", "attribute", "delete attribute", "pixel", "pixel",
                       "huge finite", "samples channel", "drop channel", "rename channel", "extra channel",
-                      "channel type", "resize", "layout"))
+                      "channel type", "resize", "layout", "header lie", "header lie"))
     present = [a[0] for a in raw.attributes]
+    if how == "header lie":
+        return _header_lie(rng, raw)
     if how == "attribute":
         name = rng.choice(sorted(set(present) | set(RECORD_NAMES)))
         kind, value = rng.choice(ATTRIBUTE_VALUES)
@@ -1584,6 +1637,51 @@ def damage_exr(rng: random.Random, raw: RawExr) -> str:
         return f"data window at {raw.origin}"
     raw.compression = rng.choice(("none", "piz", "dwaa", "b44", "pxr24", "rle"))
     return f"compression {raw.compression}"
+
+
+def _set_attribute(raw: RawExr, name: str, kind: str, value: Any) -> None:
+    raw.attributes = [a for a in raw.attributes if a[0] != name] + [[name, kind, value]]
+
+
+def _header_lie(rng: random.Random, raw: RawExr) -> str:
+    """Header fields that are each well formed but contradict each other or the pixels (issue
+    38.4): a resume that trusted them allocated 24 GiB, or silently dropped samples."""
+    import numpy as np
+
+    how = rng.choice(("spp 0 over samples", "spp below the counts", "spp above the counts", "huge light samples",
+                      "counts beyond the ranges", "zero-count pixel with data", "one sample with variance",
+                      "counts past float32", "split counts"))
+    spp = next((a[2] for a in raw.attributes if a[0] == "tracer:spp"), 4)
+    spp = spp if isinstance(spp, int) else 4
+    if how == "spp 0 over samples":
+        _set_attribute(raw, "tracer:spp", "int", 0)
+    elif how in ("spp below the counts", "spp above the counts"):
+        _set_attribute(raw, "tracer:spp", "int", max(0, spp - 1) if how.endswith("below the counts") else spp + 3)
+        if rng.random() < 0.5:
+            raw.channels.append(["samples", "float", np.full((raw.height, raw.width), float(spp), np.float32)])
+    elif how == "huge light samples":
+        value = rng.choice((2**31 - 1, 1_000_001, 10**6, "4294967296"))
+        _set_attribute(raw, rng.choice(("tracer:light_samples", "tracer:bsdf_samples")),
+                       "int" if isinstance(value, int) else "string", value)
+        return f"header lie: light/bsdf samples = {value}"
+    elif how == "counts beyond the ranges":
+        _set_attribute(raw, "tracer:samples", "string", rng.choice(("1:0-0", "1:0-1", "3:0-2,4:0-0")))
+    elif how == "zero-count pixel with data":
+        counts = np.full((raw.height, raw.width), float(spp), np.float32)
+        counts[rng.randrange(raw.height), rng.randrange(raw.width)] = 0.0
+        raw.channels = [c for c in raw.channels if c[0] != "samples"] + [["samples", "float", counts]]
+    elif how == "one sample with variance":
+        _set_attribute(raw, "tracer:spp", "int", 1)
+    elif how == "counts past float32":
+        counts = np.full((raw.height, raw.width), float(2**24 + 2), np.float32)
+        counts[0, 0] = float(2**24 + rng.choice((1, 3, 8)))
+        raw.channels = [c for c in raw.channels if c[0] != "samples"] + [["samples", "float", counts]]
+    else:
+        low = np.full((raw.height, raw.width), float(rng.choice((spp, 2**24, 2**24 - 1))), np.float32)
+        high = np.full((raw.height, raw.width), float(rng.choice((0, 1, 2**24, 2**25, -1))), np.float32)
+        raw.channels = [c for c in raw.channels if c[0] != "samples"] + [
+            ["samples.low", "float", low]] + ([["samples.high", "float", high]] if rng.random() < 0.8 else [])
+    return f"header lie: {how}"
 
 
 def damage_exr_bytes(rng: random.Random, data: bytes, folder: Path, name: str) -> str:
@@ -1800,11 +1898,19 @@ def make_baseline_case(seed: int, index: int, root: Path, base: Path) -> Case:
         text, description = damage_bytes(rng, text)
         case.mutations.append(f"text: {description}")
     elif roll < 0.28:
-        baseline = rng.choice(("/dev/zero", "missing.json", "meshes", "ref.exr"))
+        baseline = rng.choice(("/dev/zero", "missing.json", "meshes", "ref.exr", "fifo.json"))
         case.mutations.append(f"--baseline {baseline}")
+    elif roll < 0.31 and isinstance(doc.get("entries"), list) and doc["entries"] \
+            and isinstance(doc["entries"][0], dict):
+        doc["entries"][0]["scene"] = "fifo.toml"  # an entry whose scene is a FIFO (issue 38.8)
+        text = json_dumps(doc).encode("utf-8", errors="surrogatepass")
+        case.mutations.append("entries[0].scene is a FIFO")
+    for fifo in ("fifo.json", "fifo.toml"):
+        os.mkfifo(folder / fifo)
     (folder / "baseline.json").write_bytes(text)
     update = rng.random() < 0.25
-    inputs = ("baseline.json", "ref.exr", "missing.json", "meshes", "/dev/zero", "cornell", "tallbox")
+    inputs = ("baseline.json", "ref.exr", "missing.json", "meshes", "/dev/zero", "cornell", "tallbox",
+              "fifo.json", "fifo.toml")
     case.checks.append(Check("api-load-baseline", probe=("load_baseline", (str(folder / baseline),)),
                              inputs=inputs))
     argv = ["check", "--baseline", baseline, "--out", "check_failures", "--threads", "1"]
@@ -1814,6 +1920,29 @@ def make_baseline_case(seed: int, index: int, root: Path, base: Path) -> Case:
     case.checks.append(Check("cli-check-update" if update else "cli-check", argv, allowed=(0, 1, 2),
                              outputs=("baseline.json",) if update else (),
                              optional_outputs=("check_failures",), inputs=inputs))
+    return case
+
+
+# =============================================================================================
+# The run
+
+
+# =============================================================================================
+# Mitsuba XML cases (the generators: benchmarks/fuzz_xml.py)
+
+
+def make_xml_case(seed: int, index: int, root: Path) -> Case:
+    """XML case ``index``: a small Mitsuba scene with hostile changes (``fuzz_xml``); two checks."""
+    import fuzz_xml
+
+    rng = random.Random(f"{seed}:xml:{index}")
+    folder = root / f"xml-{index:04d}"
+    folder.mkdir(parents=True)
+    mutations, inputs = fuzz_xml.build(rng, folder)
+    case = Case("xml", index, folder, mutations)
+    case.checks.append(Check("api-load-xml", probe=("load_scene", (str(folder / "scene.xml"),)), inputs=inputs))
+    case.checks.append(Check("cli-render-xml", argv=["render", "scene.xml", "-o", "out.exr", *TINY_RENDER],
+                             outputs=("out.exr", "out.png"), inputs=inputs + ("out.exr",)))
     return case
 
 
@@ -1852,11 +1981,12 @@ def build_cases(seed: int, counts: dict[str, int], root: Path, base: Path,
                 only: tuple[str, int] | None = None) -> list[Case]:
     makers = {"scene": lambda i: make_scene_case(seed, i, root),
               "exr": lambda i: make_exr_case(seed, i, root, base),
-              "baseline": lambda i: make_baseline_case(seed, i, root, base)}
+              "baseline": lambda i: make_baseline_case(seed, i, root, base),
+              "xml": lambda i: make_xml_case(seed, i, root)}
     if only is not None:
         cases = [makers[only[0]](only[1])]
     else:
-        cases = [makers[family](i) for family in ("scene", "exr", "baseline") for i in range(counts[family])]
+        cases = [makers[family](i) for family in FAMILIES for i in range(counts.get(family, 0))]
     for case in cases:  # a 10000-character key is a mutation; its description need not be
         case.mutations = [m if len(m) <= 200 else m[:197] + "..." for m in case.mutations]
     return cases
@@ -1922,6 +2052,16 @@ def kept_name(outcome: Outcome) -> str:
     return f"{outcome.case.family}-{outcome.case.index:04d}-{outcome.check.name}-{outcome.kind}"
 
 
+def _copy_keeping_fifos(source: str, target: str) -> None:
+    """copytree's copy: a FIFO is made anew (copying one would wait for a writer)."""
+    import stat
+
+    if stat.S_ISFIFO(os.lstat(source).st_mode):
+        os.mkfifo(target)
+    else:
+        shutil.copy2(source, target)
+
+
 def keep_failure(outcome: Outcome, keep: Path) -> Path:
     """Copy a failing case's folder to ``keep`` with REPRO.txt; returns the copy's path."""
     import pickle
@@ -1929,7 +2069,7 @@ def keep_failure(outcome: Outcome, keep: Path) -> Path:
     target = keep / kept_name(outcome)
     if target.exists():
         shutil.rmtree(target)
-    shutil.copytree(outcome.case.folder, target, symlinks=True)
+    shutil.copytree(outcome.case.folder, target, symlinks=True, copy_function=_copy_keeping_fifos)
     probe = outcome.check.probe
     if probe is not None and probe[0] == "load_scene" and len(probe[1]) == 2:
         doc = probe[1][0]
@@ -1948,7 +2088,8 @@ def keep_failure(outcome: Outcome, keep: Path) -> Path:
 
 def run(seed: int = 0, scenes: int = 300, exrs: int = 100, baselines: int = 60, jobs: int = 2,
         timeout: float = 120.0, keep: Path | None = None, memory_gib: float = 4.0,
-        only: tuple[str, int] | None = None, progress: bool = True, workdir: Path | None = None) -> Report:
+        only: tuple[str, int] | None = None, progress: bool = True, workdir: Path | None = None,
+        xmls: int = 0) -> Report:
     """Generate the cases, run every check, keep the failures' reproducers; returns the report."""
     start = time.monotonic()
     memory_bytes = int(memory_gib * (1 << 30))
@@ -1956,7 +2097,7 @@ def run(seed: int = 0, scenes: int = 300, exrs: int = 100, baselines: int = 60, 
     try:
         base = root / "base"
         make_base_renders(base, timeout)
-        counts = {"scene": scenes, "exr": exrs, "baseline": baselines}
+        counts = {"scene": scenes, "exr": exrs, "baseline": baselines, "xml": xmls}
         cases = build_cases(seed, counts, root / "cases", base, only)
         probe = ProbeWorker(timeout, memory_bytes)
         outcomes: list[Outcome] = []
@@ -2048,7 +2189,7 @@ def format_report(report: Report, keep: Path | None = None) -> str:
 
 def parse_only(text: str) -> tuple[str, int]:
     family, _, index = text.partition(":")
-    if family not in ("scene", "exr", "baseline") or not index.isdigit():
+    if family not in FAMILIES or not index.isdigit():
         raise argparse.ArgumentTypeError("expected FAMILY:INDEX, e.g. exr:17")
     return family, int(index)
 
@@ -2060,6 +2201,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenes", type=int, default=300, help="scene cases (default 300)")
     parser.add_argument("--exrs", type=int, default=100, help="EXR cases (default 100)")
     parser.add_argument("--baselines", type=int, default=60, help="baseline cases (default 60)")
+    parser.add_argument("--xmls", type=int, default=100, help="Mitsuba XML cases (default 100)")
     parser.add_argument("--jobs", type=int, default=2, help="subprocesses at a time (default 2)")
     parser.add_argument("--timeout", type=float, default=120.0,
                         help="seconds per check before it counts as a hang (default 120: the first run "
@@ -2069,7 +2211,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", type=parse_only, help="run one case, FAMILY:INDEX (e.g. scene:12)")
     args = parser.parse_args(argv)
     report = run(args.seed, args.scenes, args.exrs, args.baselines, args.jobs, args.timeout, args.keep,
-                 args.memory_gib, args.only)
+                 args.memory_gib, args.only, xmls=args.xmls)
     print(format_report(report, args.keep))
     return 1 if report.failures else 0
 

@@ -831,7 +831,7 @@ def test_ior_names_are_mitsubas():
     ('<bsdf type="conductor"><float name="ext_ior" value="1.2"/></bsdf>', ["no property 'ext_ior'"]),
     ('<bsdf type="plastic"><string name="int_ior" value="glass"/></bsdf>', ["unknown IOR name 'glass'"]),
     ('<bsdf type="plastic"><rgb name="int_ior" value="1.5"/></bsdf>', ["'int_ior' is a float"]),
-    ('<bsdf type="plastic"><float name="int_ior" value="-1"/></bsdf>', ["> 0"]),
+    ('<bsdf type="plastic"><float name="int_ior" value="-1"/></bsdf>', [">= 0.01"]),
     # Mitsuba: "Invalid RGB reflectance value [2, 2, 2], must be in the range [0, 1]!"
     ('<bsdf type="diffuse"><rgb name="reflectance" value="2, 2, 2"/></bsdf>', ["<= 1"]),
     ('<bsdf type="diffuse"><float name="reflectance" value="-0.1"/></bsdf>', [">= 0"]),
