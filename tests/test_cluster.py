@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -250,3 +251,84 @@ def test_resume_on_the_cluster_is_the_local_resume(client, tmp_path):
     assert local.record.version == dask.record.version
     assert cli.main(["reference", scene, "--heuristic", "optimal", "--workers", "2", *size,
                      "-o", str(tmp_path / "optimal.exr")]) == 2
+
+
+# The wait --connect-timeout gives a scheduler in the tests below; a run that fails must end
+# within it (plus the seconds Python takes to start), far below the test's own timeout.
+CONNECT_SECONDS = 5
+HTTP_ANSWER = b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
+
+
+@pytest.fixture
+def tiny_server():
+    """tiny_server(answer) -> port of a TCP server on 127.0.0.1 that, for each connection, reads
+    once and sends ``answer`` and closes (an HTTP server's refusal), or for None accepts and
+    never answers (a silent server). It stops with the test."""
+    listeners, held = [], []
+
+    def start(answer: bytes | None) -> int:
+        listener = socket.create_server(("127.0.0.1", 0))
+        listeners.append(listener)
+
+        def serve():
+            while True:
+                try:
+                    conn, _ = listener.accept()
+                except OSError:  # closed by the test's end
+                    return
+                held.append(conn)
+                if answer is not None:
+                    with conn:
+                        conn.recv(65536)
+                        conn.sendall(answer)
+
+        threading.Thread(target=serve, daemon=True).start()
+        return listener.getsockname()[1]
+
+    yield start
+    for sock in listeners + held:
+        sock.close()
+
+
+def _run_tracer(argv, timeout: float) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "tracer", *argv], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+@pytest.mark.parametrize("server, scheme, words", [
+    ("http", "tcp", "does not answer in Dask's protocol"),
+    ("silent", "tcp", "gave no answer in Dask's protocol within 5 s"),
+    ("http", "tls", "needs Dask's TLS settings"),
+    ("http", "ucx", "not an address of a Dask scheduler tracer can reach"),
+])
+def test_a_scheduler_address_that_is_no_dask_scheduler_is_one_line(tmp_path, tiny_server, server, scheme,
+                                                                   words):
+    """``--scheduler`` at an HTTP server (whose answer Dask read as a frame of 3 EiB: a numpy
+    MemoryError), a server that accepts and never answers (Dask's handshake waited past 100 s),
+    and tls:// without TLS settings and ucx:// (Dask raised TypeError): one line naming the
+    address and what is wrong, exit 2, within the connect timeout, and no file."""
+    _distributed()
+    port = tiny_server(HTTP_ANSWER if server == "http" else None)
+    address = f"{scheme}://127.0.0.1:{port}"
+    out = tmp_path / "ref.exr"
+    started = time.monotonic()
+    proc = _run_tracer(["reference", str(scene_mod.default_scene_path()), "--scheduler", address,
+                        "--connect-timeout", str(CONNECT_SECONDS), "--spp", "4", "--width", "8",
+                        "--height", "8", "-o", str(out)], timeout=CONNECT_SECONDS + 60)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith("tracer: error: --scheduler: ") and address in lines[0], lines
+    assert words in lines[0] and "Traceback" not in proc.stderr, lines
+    assert time.monotonic() - started < CONNECT_SECONDS + 30, "it did not end within the connect timeout"
+    assert not out.exists()
+
+
+def test_a_workers_address_is_refused_as_not_the_scheduler(client, tmp_path, capsys):
+    """A worker answers Dask's handshake too: its address is refused in one line saying so."""
+    from tracer import cli
+
+    worker = next(iter(client.scheduler_info()["workers"]))
+    code = cli.main(["reference", str(scene_mod.default_scene_path()), "--scheduler", worker,
+                     "--connect-timeout", str(CONNECT_SECONDS), "--spp", "4", "-o", str(tmp_path / "r.exr")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "is a Dask worker, not a Dask scheduler" in err[0], err

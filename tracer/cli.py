@@ -394,6 +394,9 @@ def _add_cluster_options(p: argparse.ArgumentParser, tasks: str, task_spp: bool 
                        help="start a local Dask cluster of N single-threaded worker processes")
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="use the existing Dask cluster whose scheduler is at ADDRESS (tcp://host:8786)")
+    g.add_argument("--connect-timeout", type=_positive_float, metavar="SECONDS", default=None,
+                   help="with --scheduler: seconds the scheduler has to answer, and again to have a "
+                   "worker (default 20)")
     if task_spp:
         g.add_argument("--task-spp", type=_spp, metavar="N",
                        help="samples per pixel of a task, rounded down to a power-of-two number of the "
@@ -403,11 +406,13 @@ def _add_cluster_options(p: argparse.ArgumentParser, tasks: str, task_spp: bool 
 
 def _cluster(args: argparse.Namespace):
     """A Dask client for --workers or --scheduler (tracer.cluster.connect), or None for neither."""
+    if args.connect_timeout is not None and args.scheduler is None:
+        raise InputError("--connect-timeout is the wait for --scheduler", "command line")
     if args.workers is None and args.scheduler is None:
         return contextlib.nullcontext()
-    from .cluster import connect
+    from .cluster import CONNECT_SECONDS, connect
 
-    return connect(args.workers, args.scheduler)
+    return connect(args.workers, args.scheduler, args.connect_timeout or CONNECT_SECONDS)
 
 
 def main(argv: list[str] | None = None) -> int:

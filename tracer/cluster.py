@@ -34,7 +34,7 @@ from collections.abc import Iterator, Sequence
 from typing import Any
 
 from . import interrupts, merge_tree
-from .errors import InputError
+from .errors import InputError, shown
 from .estimators import DirectLighting
 from .film import Film
 from .record import merged
@@ -56,7 +56,13 @@ INSTALL_HINT = ("install Dask's distributed scheduler: pip install \".[cluster]\
 # delays the end by a small share, few enough that each task's fixed cost (a film sent back and
 # merged, a few milliseconds at 256x256) stays small against its rendering.
 TASKS_PER_THREAD = 4
-CONNECT_TIMEOUT = "20s"
+# Seconds to wait for an existing scheduler (--scheduler) to answer, and again for its first
+# worker: long enough for a scheduler across a slow network, short enough that a wrong address
+# fails while the user still waits for it (``--connect-timeout`` changes it).
+CONNECT_SECONDS = 20.0
+# The transports a --scheduler address may name. ``inproc`` reaches only a scheduler in this
+# process; ``ucx`` is an empty stub in current Dask (its connector cannot be made).
+TRANSPORTS = ("tcp", "tls", "ws", "wss")
 GATHER_TIMEOUT = 60.0  # seconds to fetch a finished film after Ctrl-C or a failure
 
 
@@ -80,23 +86,28 @@ def _distributed():
 
 
 @contextlib.contextmanager
-def connect(workers: int | None = None, scheduler: str | None = None) -> Iterator[Any]:
+def connect(workers: int | None = None, scheduler: str | None = None,
+            timeout: float = CONNECT_SECONDS) -> Iterator[Any]:
     """A Dask ``Client``: of a new local cluster of ``workers`` single-threaded worker processes,
-    or of the existing scheduler at ``scheduler`` (``tcp://host:8786``). The local cluster is
-    shut down on leaving."""
+    or of the existing scheduler at ``scheduler`` (``tcp://host:8786``), which must answer as a
+    Dask scheduler within ``timeout`` seconds and have a worker within as many again (else an
+    ``InputError`` naming the address and what went wrong). The local cluster is shut down on
+    leaving."""
     distributed = _distributed()
     if scheduler is not None:
+        security = _security_for(distributed, scheduler)
+        _probe_scheduler(distributed, scheduler, timeout, security)
         try:
-            client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise InputError(f"cannot reach the Dask scheduler at {scheduler!r}: {exc}",
-                             "--scheduler") from None
+            client = distributed.Client(scheduler, timeout=timeout, security=security)
+        except Exception as exc:  # the probe passed: whatever fails now is the scheduler's side
+            raise InputError(f"cannot connect to the Dask scheduler at {shown(scheduler)}: "
+                             f"{_described(exc)}", "--scheduler") from None
         with client:
             try:
-                client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+                client.wait_for_workers(1, timeout=timeout)
             except TimeoutError:
-                raise InputError(f"the Dask scheduler at {scheduler!r} has no workers (waited "
-                                 f"{CONNECT_TIMEOUT})", "--scheduler") from None
+                raise InputError(f"the Dask scheduler at {shown(scheduler)} has no workers (waited "
+                                 f"{timeout:g} s)", "--scheduler") from None
             _check_workers(client)
             yield client
         return
@@ -123,6 +134,111 @@ def connect(workers: int | None = None, scheduler: str | None = None) -> Iterato
 
 def _main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
+
+
+def _described(exc: BaseException) -> str:
+    """An exception as a short phrase for an error line: the type and first line, cut, of the
+    error at the root of its chain (Dask wraps a refused connection in its own error, whose
+    text is the connector object's repr)."""
+    while exc.__cause__ is not None:
+        exc = exc.__cause__
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {shown(text[0])}" if text else type(exc).__name__
+
+
+def _security_for(distributed, address: str):
+    """Dask's ``Security`` (from Dask's configuration) for connecting to ``address``, after
+    checking that its transport is one tracer can use: ``InputError`` otherwise (before
+    any connection, which Dask would answer with a ``TypeError``)."""
+    from distributed.comm.addressing import parse_address
+
+    scheme, location = parse_address(address)
+    if scheme not in TRANSPORTS or not location:
+        raise InputError(f"{shown(address)} is not an address of a Dask scheduler tracer can reach: "
+                         f"expected {', '.join(s + '://HOST:PORT' for s in TRANSPORTS)} (or HOST:PORT "
+                         "for tcp)", "--scheduler")
+    security = distributed.Security()
+    if scheme in ("tls", "wss") and security.get_connection_args("client")["ssl_context"] is None:
+        raise InputError(f"{shown(address)}: {scheme}:// needs Dask's TLS settings (the client's "
+                         "certificate, key and CA file: distributed.comm.tls.client.cert, .client.key "
+                         "and distributed.comm.tls.ca-file in Dask's configuration, or the "
+                         "DASK_DISTRIBUTED__COMM__TLS__... environment variables), and none are set",
+                         "--scheduler")
+    return security
+
+
+# How long the probe's thread may outlive its own deadline (asyncio's cancellation, closing
+# the socket) before the driver stops waiting for it.
+_PROBE_GRACE_SECONDS = 5.0
+
+
+def _probe_scheduler(distributed, address: str, seconds: float, security) -> None:
+    """``InputError`` unless a Dask scheduler answers at ``address`` within ``seconds``.
+
+    Dask's ``Client`` alone cannot be trusted with a wrong address: its handshake waits without
+    a deadline for a server that accepts the connection and never answers, and it reads the
+    first 8 bytes of any other server's answer as a frame length (an HTTP server's "HTTP/1.1"
+    asks numpy for exabytes). So before the ``Client``, this connects once itself, in steps
+    under one deadline: the connection, Dask's handshake, and the ``identity`` request, whose
+    answer names the kind of server (a worker answers too, as a ``Worker``)."""
+    import asyncio
+
+    from distributed.comm.addressing import parse_address
+    from distributed.comm.registry import get_backend
+
+    scheme, location = parse_address(address)
+    step = ["connecting"]
+
+    async def identity() -> Any:
+        try:
+            connector = get_backend(scheme).get_connector()
+        except Exception as exc:  # a transport Dask lists but cannot make
+            raise InputError(f"Dask's {scheme}:// transport does not work in this install "
+                             f"({_described(exc)})", "--scheduler") from None
+        comm = await connector.connect(location, deserialize=True, **security.get_connection_args("client"))
+        try:
+            step[0] = "waiting for Dask's handshake"
+            await comm.write(comm.handshake_info())
+            await comm.read()
+            step[0] = "waiting for the answer to Dask's identity request"
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    outcome: dict[str, Any] = {}
+
+    def run() -> None:  # on a thread of its own: the caller may already run an event loop
+        try:
+            outcome["reply"] = asyncio.run(asyncio.wait_for(identity(), seconds))
+        except BaseException as exc:  # handed to the caller, who decides
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=run, name="tracer-scheduler-probe", daemon=True)
+    thread.start()
+    thread.join(seconds + _PROBE_GRACE_SECONDS)
+    error = outcome.get("error")
+    where = f"the Dask scheduler at {shown(address)}"
+    if isinstance(error, InputError):
+        raise error
+    if thread.is_alive() or isinstance(error, TimeoutError):
+        if step[0] == "connecting":
+            raise InputError(f"cannot reach {where}: no connection within {seconds:g} s", "--scheduler")
+        raise InputError(f"{shown(address)} accepted the connection but gave no answer in Dask's protocol "
+                         f"within {seconds:g} s ({step[0]}): is a Dask scheduler listening there?",
+                         "--scheduler")
+    if error is not None and step[0] == "connecting":  # refused, no such host, no port, ...
+        raise InputError(f"cannot reach {where}: {_described(error)}", "--scheduler")
+    if error is not None:  # a closed connection, garbage read as a frame length, ...
+        raise InputError(f"{shown(address)} does not answer in Dask's protocol ({step[0]}: "
+                         f"{_described(error)}): is a Dask scheduler listening there?", "--scheduler")
+    reply = outcome["reply"]
+    kind = reply.get("type") if isinstance(reply, dict) else None
+    if kind != "Scheduler":
+        found = (f"a Dask {shown(kind).lower()}" if isinstance(kind, str)
+                 else "a server that speaks Dask's protocol")
+        raise InputError(f"{shown(address)} is {found}, not a Dask scheduler: give the address of the "
+                         "cluster's scheduler", "--scheduler")
 
 
 def _worker_identity() -> tuple[str, str]:
