@@ -29,6 +29,7 @@ from tracer.imagefiles import read_exr
 from tracer.render_loop import RenderSettings, pass_samples, pooled_into, render
 from tracer.strategy import Strategy
 
+from test_interrupts import InterruptedFinalizer
 from test_merge_tree import same_film, small_scene
 
 REQUIRED = os.environ.get("TRACER_CLUSTER_TESTS") == "required"
@@ -332,3 +333,29 @@ def test_a_workers_address_is_refused_as_not_the_scheduler(client, tmp_path, cap
                      "--connect-timeout", str(CONNECT_SECONDS), "--spp", "4", "-o", str(tmp_path / "r.exr")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "is a Dask worker, not a Dask scheduler" in err[0], err
+
+
+def test_an_interrupt_dropped_while_the_driver_waits_still_stops_the_render(client, monkeypatch):
+    """SIGINT landing in a finalizer while the driver waits for tasks (a Dask future's finalizer
+    runs there when the driver lets a film go): Python drops the KeyboardInterrupt, but the
+    driver's next poll sees the recorded signal, cancels the rest and keeps the finished tasks."""
+    from tracer import cluster, interrupts
+
+    scene = small_scene()
+    strategy = Strategy("mis")
+    k = pass_samples(10**6, 32 * 24, strategy.samples_per_lane)
+    settings = RenderSettings(spp=400 * k, seed=5, threads=2)
+    logged = cluster._log_progress
+
+    def logged_then_finalize(done, total):
+        logged(done, total)
+        if done == 1:
+            InterruptedFinalizer()
+
+    monkeypatch.setattr(cluster, "_log_progress", logged_then_finalize)
+    dropped = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda report: dropped.append(report.exc_type))
+    with interrupts.watching():
+        result = cluster.render_distributed(client, scene, strategy, settings, progress=True, task_spp=4 * k)
+    assert KeyboardInterrupt in dropped
+    assert result.interrupted and 0 < result.film.spp < settings.spp

@@ -418,22 +418,30 @@ def _cluster(args: argparse.Namespace):
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    _terminate_like_ctrl_c()
     previous = notices.set_handler(_print_note())
-    try:
-        return args.run(args)
-    except InputError as exc:
-        print(f"tracer: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("tracer: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except BrokenPipeError:
-        # `tracer ... | head`: the reader left; say nothing more (and nothing at exit either).
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
-    finally:
-        notices.set_handler(previous)
+    # SIGTERM (kill, a batch scheduler's time limit) stops a command as Ctrl-C does, and neither
+    # can be lost to a finalizer that drops its KeyboardInterrupt (tracer.interrupts).
+    with interrupts.watching():
+        try:
+            code = args.run(args)
+        except InputError as exc:
+            print(f"tracer: error: {exc}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        except KeyboardInterrupt:
+            print("tracer: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except BrokenPipeError:
+            # `tracer ... | head`: the reader left; say nothing more (and nothing at exit either).
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 0
+        finally:
+            notices.set_handler(previous)
+        if interrupts.pending() and code == 0:
+            # A signal whose KeyboardInterrupt was dropped after the work's last check: the work
+            # is done and written; the command still ends as interrupted.
+            print("tracer: interrupted (after the work was done and written)", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        return code
 
 
 def _print_note():
@@ -447,19 +455,6 @@ def _print_note():
             print(f"tracer: note: {line}", file=sys.stderr)
 
     return handler
-
-
-def _terminate_like_ctrl_c() -> None:
-    """SIGTERM (kill, a batch scheduler's time limit) stops a render as Ctrl-C does: what was
-    rendered is written. Only possible from the main thread."""
-    import signal
-    import threading
-
-    def handler(signum, frame):
-        raise KeyboardInterrupt
-
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, handler)
 
 
 def _strategy_from(args: argparse.Namespace, name: str, light_sampling: str | None = None,

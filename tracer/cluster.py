@@ -41,6 +41,7 @@ from .record import merged
 from .render_loop import (
     RenderResult,
     RenderSettings,
+    close_quietly,
     film_to_fill,
     progress_bar,
     render,
@@ -63,6 +64,9 @@ CONNECT_SECONDS = 20.0
 # The transports a --scheduler address may name. ``inproc`` reaches only a scheduler in this
 # process; ``ucx`` is an empty stub in current Dask (its connector cannot be made).
 TRANSPORTS = ("tcp", "tls", "ws", "wss")
+# Seconds between looks at a cluster's tasks while none finishes: how late an interrupt whose
+# KeyboardInterrupt a finalizer dropped is acted on (``tracer.interrupts``).
+POLL_SECONDS = 0.1
 GATHER_TIMEOUT = 60.0  # seconds to fetch a finished film after Ctrl-C or a failure
 
 
@@ -381,7 +385,8 @@ def render_distributed(client, scene: Scene, strategy: Strategy, settings: Rende
         node_of = {future.key: node for node, future in futures.items()}
         tasks = set(nodes)
         done = 0
-        for future, _ in _completed(list(futures.values()), with_results=False):
+        tracker = _distributed().as_completed(list(futures.values()), with_results=False, raise_errors=False)
+        for future, _ in _completed(tracker):
             node = node_of[future.key]
             if node in tasks:
                 done += 1
@@ -396,9 +401,9 @@ def render_distributed(client, scene: Scene, strategy: Strategy, settings: Rende
         interrupted = True
         lost = exc if isinstance(exc, ClusterLost) else None
         parts = _gather_finished(client, tree, futures, children)
+        interrupts.clear()  # acted on: the finished tasks are kept below
     finally:
-        if bar is not None:
-            bar.close()
+        close_quietly(bar)
     seconds = time.perf_counter() - start
     samples = nonfinite = 0
     if parts:
@@ -448,15 +453,24 @@ def _log_progress(done: int, total: int) -> None:
         print(f"tracer: {done} of {total} tasks done", file=sys.stderr, flush=True)
 
 
-def _completed(futures, with_results: bool = True) -> Iterator[tuple[Any, Any]]:
-    """``(future, result)`` as tasks finish (result None unless ``with_results``: the data stay on
-    the workers). A task that raised raises its error here (a worker's ``InputError`` stays one);
+def _completed(tracker) -> Iterator[tuple[Any, Any]]:
+    """``(future, result)`` as the tasks of ``tracker`` (a ``distributed.as_completed``, which may
+    be added to meanwhile) finish (result None unless it has results: else the data stay on the
+    workers). A task that raised raises its error here (a worker's ``InputError`` stays one);
     one the cluster lost (a worker killed too often, the scheduler gone, its inputs lost) raises
-    ``ClusterLost``."""
+    ``ClusterLost``. Waits in polls of ``POLL_SECONDS``, each ending with ``interrupts.check``:
+    an interrupt dropped by a finalizer (a Dask future's, for one) stops the wait all the same."""
     distributed = _distributed()
-    finished = distributed.as_completed(futures, with_results=with_results, raise_errors=False)
-    for item in finished:
-        future, result = item if with_results else (item, None)
+    while True:
+        interrupts.check()
+        if not tracker.has_ready():
+            if tracker.is_empty():
+                return
+            with tracker.thread_condition:
+                tracker.thread_condition.wait(timeout=POLL_SECONDS)
+            continue
+        item = next(tracker)
+        future, result = item if tracker.with_results else (item, None)
         if future.status != "finished":
             try:
                 future.result()
@@ -505,7 +519,8 @@ def map_tasks(client, function, calls: Sequence[tuple], progress: bool = False) 
         for key, call in zip(keys, calls, strict=True):
             pending[key] = client.submit(function, *map(shared, call), key=key)
         results: dict[str, Any] = {}
-        for future, result in _completed(list(pending.values())):
+        tracker = _distributed().as_completed(list(pending.values()), with_results=True, raise_errors=False)
+        for future, result in _completed(tracker):
             results[future.key] = result
             del pending[future.key]  # its result is here: the workers may let it go
             if bar is not None:
@@ -516,8 +531,7 @@ def map_tasks(client, function, calls: Sequence[tuple], progress: bool = False) 
             client.cancel(list(pending.values()))
         raise
     finally:
-        if bar is not None:
-            bar.close()
+        close_quietly(bar)
 
 
 def render_whole(scene: Scene, strategy: Strategy, settings: RenderSettings) -> RenderResult:

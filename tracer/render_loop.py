@@ -233,6 +233,9 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     (a task of a distributed render, ``tracer.cluster``): with the same random numbers and the
     same bits as the whole render has there. Estimators that learn cannot render a part: what
     they apply depends on every earlier sample.
+
+    Ctrl-C is never lost to a finalizer that drops its ``KeyboardInterrupt``: the loop calls
+    ``interrupts.check`` between batches (``tracer.interrupts``).
     """
     cam = scene.camera
     runs = estimator.strategy if estimator is not None else strategy
@@ -286,6 +289,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
             _compile(estimator, leaf.film, sampler)
         if arrived:
             raise KeyboardInterrupt
+        interrupts.check()
         # Compiling takes ~20 s; loading from the cache up to a few seconds on a loaded machine.
         if progress and time.perf_counter() - start > 5.0:
             print(f"tracer: compiled the shading kernels in {time.perf_counter() - start:.1f} s "
@@ -322,6 +326,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
                     merge(batch, result)
                 if arrived:
                     raise KeyboardInterrupt
+                interrupts.check()
         else:
             with ThreadPoolExecutor(max_workers=threads) as pool:
                 interrupted = _run_pipelined(pool, threads, batches, estimator, sampler, merge,
@@ -331,8 +336,9 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         interrupted = True
         seconds = time.perf_counter() - start
     finally:
-        if bar is not None:
-            bar.close()
+        close_quietly(bar)
+    if interrupted:
+        interrupts.clear()  # acted on: the finished batches are kept below
     pooled = leaf.finish(complete=not interrupted)
     # Each pixel holds a prefix of its new indices (batches start in plan order and every
     # started one is merged), so an interrupted render drew first .. first + (most added) - 1.
@@ -347,6 +353,17 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     if learner is not None:
         film.learned = learner.maps()
     return RenderResult(film, seconds, samples, nonfinite, interrupted, learner)
+
+
+def close_quietly(bar) -> None:
+    """Close a progress bar (None: nothing) with Ctrl-C held back: raised there, after the loop
+    that it counted, the interrupt would escape the code that keeps the finished work. One that
+    arrives is left pending, for the command to end as interrupted (``tracer.interrupts``)."""
+    if bar is None:
+        return
+    with interrupts.deferred() as arrived:
+        bar.close()
+    interrupts.leave_pending(arrived)
 
 
 def tree_layout(scene: Scene, strategy: Strategy, settings: RenderSettings) -> merge_tree.Layout:
@@ -464,6 +481,7 @@ def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: Iterator[Bat
             merge(batch, result)
         if arrived:
             raise KeyboardInterrupt
+        interrupts.check()
 
     try:
         for batch in batches:
