@@ -12,6 +12,8 @@ The Dask tests skip when ``distributed`` is not installed, unless ``TRACER_CLUST
 from __future__ import annotations
 
 import os
+import queue
+import re
 import signal
 import socket
 import subprocess
@@ -26,6 +28,7 @@ import pytest
 from tracer import merge_tree
 from tracer import scene as scene_mod
 from tracer.imagefiles import read_exr
+from tracer.record import format_ranges
 from tracer.render_loop import RenderSettings, pass_samples, pooled_into, render
 from tracer.strategy import Strategy
 
@@ -335,6 +338,30 @@ def test_a_workers_address_is_refused_as_not_the_scheduler(client, tmp_path, cap
     assert code == 2 and len(err) == 1 and "is a Dask worker, not a Dask scheduler" in err[0], err
 
 
+def test_tasks_smaller_than_a_leaf_give_the_local_render_bit_for_bit(client, monkeypatch):
+    """With leaves of 4 passes (MAX_LEAVES lowered to 4, here and on the workers, as a render of
+    2^40 spp has leaves of 2^25 passes), tasks of 1 and 3 passes are segments of a leaf, each
+    continuing the film of the one before: the render equals the local one bit for bit, and its
+    record lists the whole range once."""
+    from tracer.cluster import render_distributed
+
+    scene = small_scene()
+    strategy = Strategy("mis")
+    k = pass_samples(10**6, 32 * 24, strategy.samples_per_lane)
+    settings = RenderSettings(spp=12 * k + 5, seed=4, threads=2)  # 13 passes: leaves of 4, 4, 4, 1
+    monkeypatch.setattr(merge_tree, "MAX_LEAVES", 4)
+    client.run(setattr, merge_tree, "MAX_LEAVES", 4)
+    try:
+        local = render(scene, strategy, settings).film
+        for task_spp in (k, 3 * k):
+            result = render_distributed(client, scene, strategy, settings, task_spp=task_spp)
+            assert not result.interrupted
+            assert same_film(result.film, local), task_spp
+            assert result.film.record.samples == ((4, 0, settings.spp),)
+    finally:
+        client.run(setattr, merge_tree, "MAX_LEAVES", 4096)
+
+
 def test_an_interrupt_dropped_while_the_driver_waits_still_stops_the_render(client, monkeypatch):
     """SIGINT landing in a finalizer while the driver waits for tasks (a Dask future's finalizer
     runs there when the driver lets a film go): Python drops the KeyboardInterrupt, but the
@@ -345,17 +372,64 @@ def test_an_interrupt_dropped_while_the_driver_waits_still_stops_the_render(clie
     strategy = Strategy("mis")
     k = pass_samples(10**6, 32 * 24, strategy.samples_per_lane)
     settings = RenderSettings(spp=400 * k, seed=5, threads=2)
-    logged = cluster._log_progress
+    logged = cluster._ProgressLog.finished
 
-    def logged_then_finalize(done, total):
-        logged(done, total)
-        if done == 1:
+    def finished_then_finalize(self, spp):
+        logged(self, spp)
+        if self.done == 1:
             InterruptedFinalizer()
 
-    monkeypatch.setattr(cluster, "_log_progress", logged_then_finalize)
+    monkeypatch.setattr(cluster._ProgressLog, "finished", finished_then_finalize)
     dropped = []
     monkeypatch.setattr(sys, "unraisablehook", lambda report: dropped.append(report.exc_type))
     with interrupts.watching():
-        result = cluster.render_distributed(client, scene, strategy, settings, progress=True, task_spp=4 * k)
+        result = cluster.render_distributed(client, scene, strategy, settings, task_spp=4 * k)
     assert KeyboardInterrupt in dropped
     assert result.interrupted and 0 < result.film.spp < settings.spp
+
+
+def test_ctrl_c_of_a_huge_distributed_reference_keeps_finished_tasks(tmp_path):
+    """``reference --spp 2^40 --workers 2`` with the default task size: leaves of 2^21 passes, so
+    tasks are segments of them of at most cluster.TASK_RAYS rays (seconds each), and SIGINT once
+    the program says a task is done keeps them: exit 130, the EXR is written, and its header's
+    sample ranges are those the message says were kept, each from the start of a leaf. Before,
+    a default task was 512 leaves (2^30 spp here) and an interrupt kept nothing."""
+    _distributed()
+    out = tmp_path / "ref.exr"
+    spp = 2**40
+    argv = ["reference", str(scene_mod.default_scene_path()), "--width", "16", "--height", "16",
+            "--spp", str(spp), "--workers", "2", "--float", "-o", str(out)]
+    proc = subprocess.Popen([sys.executable, "-m", "tracer", *argv], cwd=tmp_path, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in proc.stderr] + [lines.put(None)],
+                     daemon=True).start()
+    said = []
+    try:
+        # Generous for a loaded machine (and workers that load the kernels from the cache): a
+        # task takes about 13 s on one idle thread.
+        deadline = time.monotonic() + 300
+        while not any("tasks done" in line for line in said):
+            line = lines.get(timeout=max(1.0, deadline - time.monotonic()))
+            assert line is not None, "".join(said)
+            said.append(line)
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=120)
+        while (line := lines.get(timeout=30)) is not None:
+            said.append(line)
+    finally:
+        if proc.poll() is None:  # the test failed: leave no render running
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    err = "".join(said)
+    assert proc.returncode == 130, err
+    kept = re.search(r"kept samples (\S+) as seed:first-last", err)
+    assert kept, err
+    film = read_exr(out)
+    assert format_ranges(film.record.samples) == kept.group(1)
+    held = sum(stop - first for _, first, stop in film.record.samples)
+    assert 0 < held < spp and np.all(film.count == held)
+    assert f"every pixel holds {held} spp" in err, err
+    tree = merge_tree.layout(spp, pass_samples(spp, 16 * 16, Strategy("mis").samples_per_lane))
+    assert all(first % tree.leaf_spp == 0 for _, first, _ in film.record.samples), film.record.samples

@@ -400,8 +400,9 @@ def _add_cluster_options(p: argparse.ArgumentParser, tasks: str, task_spp: bool 
     if task_spp:
         g.add_argument("--task-spp", type=_spp, metavar="N",
                        help="samples per pixel of a task, rounded down to a power-of-two number of the "
-                       "render's leaves (default: about 4 tasks per worker thread); the image does not "
-                       "depend on it")
+                       "render's leaves, or below one leaf to whole passes (default: about 4 tasks per "
+                       "worker thread, and at most about 13 s of one thread's work each); the image does "
+                       "not depend on it")
 
 
 def _cluster(args: argparse.Namespace):
@@ -573,6 +574,8 @@ def _write_outputs(film, output: Path, exposure: float, half: bool) -> bool:
 def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, exposure: float,
             half: bool = False) -> int:
     """Write the EXR and PNG of a render, report it on stderr, and return the exit status."""
+    from .record import format_ranges
+
     film = result.film
     png = output.with_suffix(".png")
     if result.interrupted and result.samples == 0:
@@ -586,8 +589,10 @@ def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, 
     if not quiet or result.interrupted:
         rate = result.samples / max(result.seconds, 1e-9)
         # The file's tracer:spp is the smallest count; a pass cut short leaves some pixels more.
+        # The ranges kept are this run's (a resumed file lists its earlier ones too).
         note = (f" (interrupted, {asked_spp} spp were asked: every pixel holds {film.spp} spp or more, "
-                f"up to {int(film.count.max())})") if result.interrupted else ""
+                f"up to {int(film.count.max())}; kept samples {format_ranges(result.drawn)} as "
+                "seed:first-last)") if result.interrupted else ""
         print(f"{scene.name}: {film.width}x{film.height}, {film.spp} spp, {strategy.label}{note}: "
               f"{result.seconds:.2f} s, {rate / 1e6:.2f} M samples/s -> {output}, {png}",
               file=sys.stderr)
