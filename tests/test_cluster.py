@@ -433,3 +433,25 @@ def test_ctrl_c_of_a_huge_distributed_reference_keeps_finished_tasks(tmp_path):
     assert f"every pixel holds {held} spp" in err, err
     tree = merge_tree.layout(spp, pass_samples(spp, 16 * 16, Strategy("mis").samples_per_lane))
     assert all(first % tree.leaf_spp == 0 for _, first, _ in film.record.samples), film.record.samples
+
+
+def test_a_worker_started_again_still_leaves_ctrl_c_to_the_driver(client):
+    """A local cluster's worker killed and started again by its nanny ignores SIGINT, as the
+    first workers do: before, it was spawned under the driver's handler, and the next Ctrl-C at
+    the terminal (sent to the whole process group) killed it with a traceback ("Process Dask
+    Worker process (from Nanny)") and lost the finished films it held ("nothing written")."""
+    pids = client.run(os.getpid)
+    victim, pid = next(iter(pids.items()))
+    os.kill(pid, signal.SIGKILL)
+    deadline = time.monotonic() + 120
+    while True:
+        # The nanny starts the worker again, which runs its callbacks right after joining: a
+        # poll, skipping a worker that is not there (yet, or any more).
+        now = client.run(os.getpid, on_error="ignore")
+        # A bool: a handler itself may not pickle (asyncio's runner installs a partial).
+        ignored = client.run(lambda: signal.getsignal(signal.SIGINT) == signal.SIG_IGN, on_error="ignore")
+        if len(now) == 2 and pid not in now.values() and all(ignored.values()):
+            break
+        assert time.monotonic() < deadline, f"workers {now}, SIGINT ignored {ignored}"
+        time.sleep(0.05)
+    client.wait_for_workers(2, timeout=60)

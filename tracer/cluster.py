@@ -148,11 +148,22 @@ def connect(workers: int | None = None, scheduler: str | None = None,
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
     with cluster, distributed.Client(cluster) as client:
+        # A worker that the nanny starts again (after it died, or was killed) is spawned now,
+        # under the driver's own handler, which exec does not pass on: it would die of the next
+        # Ctrl-C, with a traceback, and take its finished films with it. Every worker, those to
+        # come included, runs this on joining.
+        client.register_worker_callbacks(setup=_ignore_ctrl_c)
         yield client
 
 
 def _main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
+
+
+def _ignore_ctrl_c() -> None:
+    """On a local cluster's worker: SIGINT ignored (the driver alone handles Ctrl-C)."""
+    if _main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _described(exc: BaseException) -> str:
