@@ -12,7 +12,10 @@ The Dask tests skip when ``distributed`` is not installed, unless ``TRACER_CLUST
 from __future__ import annotations
 
 import os
+import queue
+import re
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -25,9 +28,11 @@ import pytest
 from tracer import merge_tree
 from tracer import scene as scene_mod
 from tracer.imagefiles import read_exr
+from tracer.record import format_ranges
 from tracer.render_loop import RenderSettings, pass_samples, pooled_into, render
 from tracer.strategy import Strategy
 
+from test_interrupts import InterruptedFinalizer
 from test_merge_tree import same_film, small_scene
 
 REQUIRED = os.environ.get("TRACER_CLUSTER_TESTS") == "required"
@@ -250,3 +255,203 @@ def test_resume_on_the_cluster_is_the_local_resume(client, tmp_path):
     assert local.record.version == dask.record.version
     assert cli.main(["reference", scene, "--heuristic", "optimal", "--workers", "2", *size,
                      "-o", str(tmp_path / "optimal.exr")]) == 2
+
+
+# The wait --connect-timeout gives a scheduler in the tests below; a run that fails must end
+# within it (plus the seconds Python takes to start), far below the test's own timeout.
+CONNECT_SECONDS = 5
+HTTP_ANSWER = b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
+
+
+@pytest.fixture
+def tiny_server():
+    """tiny_server(answer) -> port of a TCP server on 127.0.0.1 that, for each connection, reads
+    once and sends ``answer`` and closes (an HTTP server's refusal), or for None accepts and
+    never answers (a silent server). It stops with the test."""
+    listeners, held = [], []
+
+    def start(answer: bytes | None) -> int:
+        listener = socket.create_server(("127.0.0.1", 0))
+        listeners.append(listener)
+
+        def serve():
+            while True:
+                try:
+                    conn, _ = listener.accept()
+                except OSError:  # closed by the test's end
+                    return
+                held.append(conn)
+                if answer is not None:
+                    with conn:
+                        conn.recv(65536)
+                        conn.sendall(answer)
+
+        threading.Thread(target=serve, daemon=True).start()
+        return listener.getsockname()[1]
+
+    yield start
+    for sock in listeners + held:
+        sock.close()
+
+
+def _run_tracer(argv, timeout: float) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "tracer", *argv], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+@pytest.mark.parametrize("server, scheme, words", [
+    ("http", "tcp", "does not answer in Dask's protocol"),
+    ("silent", "tcp", "gave no answer in Dask's protocol within 5 s"),
+    ("http", "tls", "needs Dask's TLS settings"),
+    ("http", "ucx", "not an address of a Dask scheduler tracer can reach"),
+])
+def test_a_scheduler_address_that_is_no_dask_scheduler_is_one_line(tmp_path, tiny_server, server, scheme,
+                                                                   words):
+    """``--scheduler`` at an HTTP server (whose answer Dask read as a frame of 3 EiB: a numpy
+    MemoryError), a server that accepts and never answers (Dask's handshake waited past 100 s),
+    and tls:// without TLS settings and ucx:// (Dask raised TypeError): one line naming the
+    address and what is wrong, exit 2, within the connect timeout, and no file."""
+    _distributed()
+    port = tiny_server(HTTP_ANSWER if server == "http" else None)
+    address = f"{scheme}://127.0.0.1:{port}"
+    out = tmp_path / "ref.exr"
+    started = time.monotonic()
+    proc = _run_tracer(["reference", str(scene_mod.default_scene_path()), "--scheduler", address,
+                        "--connect-timeout", str(CONNECT_SECONDS), "--spp", "4", "--width", "8",
+                        "--height", "8", "-o", str(out)], timeout=CONNECT_SECONDS + 60)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith("tracer: error: --scheduler: ") and address in lines[0], lines
+    assert words in lines[0] and "Traceback" not in proc.stderr, lines
+    assert time.monotonic() - started < CONNECT_SECONDS + 30, "it did not end within the connect timeout"
+    assert not out.exists()
+
+
+def test_a_workers_address_is_refused_as_not_the_scheduler(client, tmp_path, capsys):
+    """A worker answers Dask's handshake too: its address is refused in one line saying so."""
+    from tracer import cli
+
+    worker = next(iter(client.scheduler_info()["workers"]))
+    code = cli.main(["reference", str(scene_mod.default_scene_path()), "--scheduler", worker,
+                     "--connect-timeout", str(CONNECT_SECONDS), "--spp", "4", "-o", str(tmp_path / "r.exr")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "is a Dask worker, not a Dask scheduler" in err[0], err
+
+
+def test_tasks_smaller_than_a_leaf_give_the_local_render_bit_for_bit(client, monkeypatch):
+    """With leaves of 4 passes (MAX_LEAVES lowered to 4, here and on the workers, as a render of
+    2^40 spp has leaves of 2^25 passes), tasks of 1 and 3 passes are segments of a leaf, each
+    continuing the film of the one before: the render equals the local one bit for bit, and its
+    record lists the whole range once."""
+    from tracer.cluster import render_distributed
+
+    scene = small_scene()
+    strategy = Strategy("mis")
+    k = pass_samples(10**6, 32 * 24, strategy.samples_per_lane)
+    settings = RenderSettings(spp=12 * k + 5, seed=4, threads=2)  # 13 passes: leaves of 4, 4, 4, 1
+    monkeypatch.setattr(merge_tree, "MAX_LEAVES", 4)
+    client.run(setattr, merge_tree, "MAX_LEAVES", 4)
+    try:
+        local = render(scene, strategy, settings).film
+        for task_spp in (k, 3 * k):
+            result = render_distributed(client, scene, strategy, settings, task_spp=task_spp)
+            assert not result.interrupted
+            assert same_film(result.film, local), task_spp
+            assert result.film.record.samples == ((4, 0, settings.spp),)
+    finally:
+        client.run(setattr, merge_tree, "MAX_LEAVES", 4096)
+
+
+def test_an_interrupt_dropped_while_the_driver_waits_still_stops_the_render(client, monkeypatch):
+    """SIGINT landing in a finalizer while the driver waits for tasks (a Dask future's finalizer
+    runs there when the driver lets a film go): Python drops the KeyboardInterrupt, but the
+    driver's next poll sees the recorded signal, cancels the rest and keeps the finished tasks."""
+    from tracer import cluster, interrupts
+
+    scene = small_scene()
+    strategy = Strategy("mis")
+    k = pass_samples(10**6, 32 * 24, strategy.samples_per_lane)
+    settings = RenderSettings(spp=400 * k, seed=5, threads=2)
+    logged = cluster._ProgressLog.finished
+
+    def finished_then_finalize(self, spp):
+        logged(self, spp)
+        if self.done == 1:
+            InterruptedFinalizer()
+
+    monkeypatch.setattr(cluster._ProgressLog, "finished", finished_then_finalize)
+    dropped = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda report: dropped.append(report.exc_type))
+    with interrupts.watching():
+        result = cluster.render_distributed(client, scene, strategy, settings, task_spp=4 * k)
+    assert KeyboardInterrupt in dropped
+    assert result.interrupted and 0 < result.film.spp < settings.spp
+
+
+def test_ctrl_c_of_a_huge_distributed_reference_keeps_finished_tasks(tmp_path):
+    """``reference --spp 2^40 --workers 2`` with the default task size: leaves of 2^21 passes, so
+    tasks are segments of them of at most cluster.TASK_RAYS rays (seconds each), and SIGINT once
+    the program says a task is done keeps them: exit 130, the EXR is written, and its header's
+    sample ranges are those the message says were kept, each from the start of a leaf. Before,
+    a default task was 512 leaves (2^30 spp here) and an interrupt kept nothing."""
+    _distributed()
+    out = tmp_path / "ref.exr"
+    spp = 2**40
+    argv = ["reference", str(scene_mod.default_scene_path()), "--width", "16", "--height", "16",
+            "--spp", str(spp), "--workers", "2", "--float", "-o", str(out)]
+    proc = subprocess.Popen([sys.executable, "-m", "tracer", *argv], cwd=tmp_path, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in proc.stderr] + [lines.put(None)],
+                     daemon=True).start()
+    said = []
+    try:
+        # Generous for a loaded machine (and workers that load the kernels from the cache): a
+        # task takes about 13 s on one idle thread.
+        deadline = time.monotonic() + 300
+        while not any("tasks done" in line for line in said):
+            line = lines.get(timeout=max(1.0, deadline - time.monotonic()))
+            assert line is not None, "".join(said)
+            said.append(line)
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=120)
+        while (line := lines.get(timeout=30)) is not None:
+            said.append(line)
+    finally:
+        if proc.poll() is None:  # the test failed: leave no render running
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    err = "".join(said)
+    assert proc.returncode == 130, err
+    kept = re.search(r"kept samples (\S+) as seed:first-last", err)
+    assert kept, err
+    film = read_exr(out)
+    assert format_ranges(film.record.samples) == kept.group(1)
+    held = sum(stop - first for _, first, stop in film.record.samples)
+    assert 0 < held < spp and np.all(film.count == held)
+    assert f"every pixel holds {held} spp" in err, err
+    tree = merge_tree.layout(spp, pass_samples(spp, 16 * 16, Strategy("mis").samples_per_lane))
+    assert all(first % tree.leaf_spp == 0 for _, first, _ in film.record.samples), film.record.samples
+
+
+def test_a_worker_started_again_still_leaves_ctrl_c_to_the_driver(client):
+    """A local cluster's worker killed and started again by its nanny ignores SIGINT, as the
+    first workers do: before, it was spawned under the driver's handler, and the next Ctrl-C at
+    the terminal (sent to the whole process group) killed it with a traceback ("Process Dask
+    Worker process (from Nanny)") and lost the finished films it held ("nothing written")."""
+    pids = client.run(os.getpid)
+    victim, pid = next(iter(pids.items()))
+    os.kill(pid, signal.SIGKILL)
+    deadline = time.monotonic() + 120
+    while True:
+        # The nanny starts the worker again, which runs its callbacks right after joining: a
+        # poll, skipping a worker that is not there (yet, or any more).
+        now = client.run(os.getpid, on_error="ignore")
+        # A bool: a handler itself may not pickle (asyncio's runner installs a partial).
+        ignored = client.run(lambda: signal.getsignal(signal.SIGINT) == signal.SIG_IGN, on_error="ignore")
+        if len(now) == 2 and pid not in now.values() and all(ignored.values()):
+            break
+        assert time.monotonic() < deadline, f"workers {now}, SIGINT ignored {ignored}"
+        time.sleep(0.05)
+    client.wait_for_workers(2, timeout=60)

@@ -136,3 +136,34 @@ def test_strategies_that_learn_are_not_cut_into_parts():
     """Optimal MIS learns from every earlier sample: a part of it would not be the whole render's."""
     with pytest.raises(InputError, match="learns"):
         render(small_scene(8, 8), Strategy("mis", "optimal"), RenderSettings(spp=64, threads=1), part=(0, 1))
+
+
+@pytest.mark.parametrize("sampler", ["independent", "stratified"])
+def test_a_leaf_rendered_as_a_chain_of_segments_is_the_leaf(sampler, monkeypatch):
+    """Leaves of 4 passes (MAX_LEAVES lowered to 4) rendered as chains of segments of 1 and 3
+    passes (``render(part=Segment, continued=...)``: what a Dask task smaller than a leaf
+    renders), each continuing the film of the one before, pool to the whole render bit for bit;
+    a segment handed the wrong film (or none) is refused."""
+    monkeypatch.setattr(merge_tree, "MAX_LEAVES", 4)
+    scene = small_scene()
+    strategy = Strategy("mis")
+    k = pass_samples(10**6, 32 * 24, strategy.samples_per_lane)
+    settings = RenderSettings(spp=12 * k + 5, seed=7, threads=1, first_sample=16, sampler=sampler)
+    whole = render(scene, strategy, dataclasses.replace(settings, threads=2)).film
+    tree = tree_layout(scene, strategy, settings)
+    assert (tree.leaves, tree.leaf_passes) == (4, 4)
+    for passes in (1, 3):
+        pool = merge_tree.Pool(tree.leaves, pooled_into)
+        for node, chain in merge_tree.tasks(tree, passes):
+            film = None
+            for segment in chain:
+                film = render(scene, strategy, settings, part=segment, continued=film).film
+            pool.add(node, film)
+        assert same_film(pool.result(), whole), passes
+    assert merge_tree.task_count(tree, 3) == 7  # leaves of 4, 4, 4 and 1 passes
+    first = render(scene, strategy, settings, part=merge_tree.Segment(0, 0, 1)).film
+    for continued in (None, first):
+        with pytest.raises(InputError, match="continues the film"):
+            render(scene, strategy, settings, part=merge_tree.Segment(1, 1, 2), continued=continued)
+    with pytest.raises(InputError, match="not a run of passes"):
+        render(scene, strategy, settings, part=merge_tree.Segment(3, 0, 2))

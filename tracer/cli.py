@@ -395,41 +395,55 @@ def _add_cluster_options(p: argparse.ArgumentParser, tasks: str, task_spp: bool 
                        help="start a local Dask cluster of N single-threaded worker processes")
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="use the existing Dask cluster whose scheduler is at ADDRESS (tcp://host:8786)")
+    g.add_argument("--connect-timeout", type=_positive_float, metavar="SECONDS", default=None,
+                   help="with --scheduler: seconds the scheduler has to answer, and again to have a "
+                   "worker (default 20)")
     if task_spp:
         g.add_argument("--task-spp", type=_spp, metavar="N",
                        help="samples per pixel of a task, rounded down to a power-of-two number of the "
-                       "render's leaves (default: about 4 tasks per worker thread); the image does not "
-                       "depend on it")
+                       "render's leaves, or below one leaf to whole passes (default: about 4 tasks per "
+                       "worker thread, and at most about 13 s of one thread's work each); the image does "
+                       "not depend on it")
 
 
 def _cluster(args: argparse.Namespace):
     """A Dask client for --workers or --scheduler (tracer.cluster.connect), or None for neither."""
+    if args.connect_timeout is not None and args.scheduler is None:
+        raise InputError("--connect-timeout is the wait for --scheduler", "command line")
     if args.workers is None and args.scheduler is None:
         return contextlib.nullcontext()
-    from .cluster import connect
+    from .cluster import CONNECT_SECONDS, connect
 
-    return connect(args.workers, args.scheduler)
+    return connect(args.workers, args.scheduler, args.connect_timeout or CONNECT_SECONDS)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    _terminate_like_ctrl_c()
     previous = notices.set_handler(_print_note())
-    try:
-        return args.run(args)
-    except InputError as exc:
-        print(f"tracer: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("tracer: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except BrokenPipeError:
-        # `tracer ... | head`: the reader left; say nothing more (and nothing at exit either).
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
-    finally:
-        notices.set_handler(previous)
+    # SIGTERM (kill, a batch scheduler's time limit) stops a command as Ctrl-C does, and neither
+    # can be lost to a finalizer that drops its KeyboardInterrupt (tracer.interrupts).
+    with interrupts.watching():
+        try:
+            code = args.run(args)
+        except InputError as exc:
+            print(f"tracer: error: {exc}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        except KeyboardInterrupt:
+            print("tracer: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except BrokenPipeError:
+            # `tracer ... | head`: the reader left; say nothing more (and nothing at exit either).
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 0
+        finally:
+            notices.set_handler(previous)
+        if interrupts.pending() and code == 0:
+            # A signal whose KeyboardInterrupt was dropped after the work's last check: the work
+            # is done and written; the command still ends as interrupted.
+            print("tracer: interrupted (after the work was done and written)", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        return code
 
 
 def _print_note():
@@ -443,19 +457,6 @@ def _print_note():
             print(f"tracer: note: {line}", file=sys.stderr)
 
     return handler
-
-
-def _terminate_like_ctrl_c() -> None:
-    """SIGTERM (kill, a batch scheduler's time limit) stops a render as Ctrl-C does: what was
-    rendered is written. Only possible from the main thread."""
-    import signal
-    import threading
-
-    def handler(signum, frame):
-        raise KeyboardInterrupt
-
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, handler)
 
 
 def _strategy_from(args: argparse.Namespace, name: str, light_sampling: str | None = None,
@@ -574,6 +575,8 @@ def _write_outputs(film, output: Path, exposure: float, half: bool) -> bool:
 def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, exposure: float,
             half: bool = False) -> int:
     """Write the EXR and PNG of a render, report it on stderr, and return the exit status."""
+    from .record import format_ranges
+
     film = result.film
     png = output.with_suffix(".png")
     if result.interrupted and result.samples == 0:
@@ -587,8 +590,10 @@ def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, 
     if not quiet or result.interrupted:
         rate = result.samples / max(result.seconds, 1e-9)
         # The file's tracer:spp is the smallest count; a pass cut short leaves some pixels more.
+        # The ranges kept are this run's (a resumed file lists its earlier ones too).
         note = (f" (interrupted, {asked_spp} spp were asked: every pixel holds {film.spp} spp or more, "
-                f"up to {int(film.count.max())})") if result.interrupted else ""
+                f"up to {int(film.count.max())}; kept samples {format_ranges(result.drawn)} as "
+                "seed:first-last)") if result.interrupted else ""
         print(f"{scene.name}: {film.width}x{film.height}, {film.spp} spp, {strategy.label}{note}: "
               f"{result.seconds:.2f} s, {rate / 1e6:.2f} M samples/s -> {output}, {png}",
               file=sys.stderr)

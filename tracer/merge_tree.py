@@ -18,12 +18,20 @@ So every render pools its samples along one tree that depends only on the render
 A render on one machine pools its leaves as they come (:class:`Pool`), holding at most one
 pending node per level (a binary counter: log2 of the leaves, 12 films at most). A distributed
 render gives each task a node of this tree (``task_nodes``) and merges sibling nodes as they
-finish, up to the pieces (``merges``), so both give the same bits, whatever the task size.
+finish, up to the pieces (the same :class:`Pool`, whose merge submits a merge task), so both
+give the same bits, whatever the task size.
+
+A task smaller than a leaf is a :class:`Segment`, some consecutive passes of one leaf: its film
+continues the fold of the segment before it (it is handed that film), so a leaf rendered as a
+chain of segments is folded exactly as the leaf rendered whole, wherever the chain is cut (a
+cut falls between passes, and a pass is folded pixel by pixel: ``tracer.film``). Segments are
+what lets a render whose leaves are huge (``2^40`` spp in 4096 leaves: ``2^28`` spp each) keep
+finished work within seconds.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
@@ -35,6 +43,20 @@ PENDING_BYTES = 4 << 30
 # A node of the tree: ``(start, size)``, leaves start .. start + size - 1.
 Node = tuple[int, int]
 T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Segment:
+    """Passes ``first_pass .. stop_pass - 1`` (counted within the leaf) of leaf ``leaf``: a task
+    smaller than a leaf, whose film continues the one of the leaf's passes before it."""
+
+    leaf: int
+    first_pass: int
+    stop_pass: int
+
+
+# What one task of a distributed render renders: a node of the tree, or a segment of a leaf.
+Task = Node | Segment
 
 
 @dataclass(frozen=True)
@@ -54,10 +76,34 @@ class Layout:
     def leaves(self) -> int:
         return -(-self.spp // self.leaf_spp)
 
-    def samples(self, node: Node) -> tuple[int, int]:
-        """``(first, stop)`` sample offsets of the leaves of ``node``."""
-        start, size = node
+    @property
+    def passes(self) -> int:
+        return -(-self.spp // self.k)
+
+    def passes_in(self, leaf: int) -> int:
+        """Passes of leaf ``leaf`` (the last leaf may hold fewer)."""
+        return min(self.leaf_passes, self.passes - leaf * self.leaf_passes)
+
+    def samples(self, task: Task) -> tuple[int, int]:
+        """``(first, stop)`` sample offsets of a node's leaves or of a segment's passes."""
+        if isinstance(task, Segment):
+            first = task.leaf * self.leaf_spp
+            return first + task.first_pass * self.k, min(self.spp, first + task.stop_pass * self.k)
+        start, size = task
         return start * self.leaf_spp, min(self.spp, (start + size) * self.leaf_spp)
+
+    def segments(self, leaf: int, passes: int) -> Iterator[Segment]:
+        """Leaf ``leaf`` as consecutive segments of ``passes`` passes (the last one what remains)."""
+        total = self.passes_in(leaf)
+        for first in range(0, total, passes):
+            yield Segment(leaf, first, min(total, first + passes))
+
+    def check_segment(self, segment: Segment) -> None:
+        """Raise ``ValueError`` unless ``segment`` is a run of passes inside one leaf."""
+        if not (0 <= segment.leaf < self.leaves
+                and 0 <= segment.first_pass < segment.stop_pass <= self.passes_in(segment.leaf)):
+            raise ValueError(f"{segment} is not a run of passes inside a leaf of this render "
+                             f"({self.leaves} leaves of {self.leaf_passes} passes)")
 
     def leaf_of(self, offset: int) -> int:
         """The leaf holding sample offset ``offset``."""
@@ -112,17 +158,35 @@ def task_nodes(leaves: int, task_leaves: int) -> list[Node]:
     return nodes
 
 
-def merges(leaves: int, task_leaves: int) -> list[tuple[Node, Node, Node]]:
-    """``(parent, left, right)`` for every node of the tree above the tasks of ``task_nodes``,
-    children before parents: the merges a cluster runs to pool the tasks up to the pieces."""
-    out = []
-    for start, size in pieces(leaves):
-        step = min(size, task_leaves)
-        while step < size:
-            out.extend(((first, 2 * step), (first, step), (first + step, step))
-                       for first in range(start, start + size, 2 * step))
-            step *= 2
-    return out
+def task_leaves(tree: Layout, task_passes: int) -> int:
+    """Leaves of a task of ``task_passes`` passes: the largest power of two of them it holds, or
+    0 when it is smaller than a leaf (a segment)."""
+    wanted = task_passes // tree.leaf_passes
+    return 1 << (wanted.bit_length() - 1) if wanted else 0
+
+
+def tasks(tree: Layout, task_passes: int) -> Iterator[tuple[Node, Iterator[Task]]]:
+    """The tasks of a distributed render of ``task_passes`` passes each, as ``(node, chain)`` in
+    leaf order: the chain's tasks, run one after the other, render that node. A task of at least
+    a leaf is a node (``task_nodes``, of :func:`task_leaves` leaves), a chain of one; a smaller
+    one is a segment, and each leaf is a chain of them, each continuing the film of the one
+    before. Lazily: a leaf may be a million segments."""
+    leaves = task_leaves(tree, task_passes)
+    if leaves:
+        for node in task_nodes(tree.leaves, leaves):
+            yield node, iter((node,))
+    else:
+        for leaf in range(tree.leaves):
+            yield (leaf, 1), tree.segments(leaf, task_passes)
+
+
+def task_count(tree: Layout, task_passes: int) -> int:
+    """How many tasks :func:`tasks` gives (without listing them)."""
+    leaves = task_leaves(tree, task_passes)
+    if leaves:
+        return len(task_nodes(tree.leaves, leaves))
+    per_leaf = -(-tree.leaf_passes // task_passes)
+    return (tree.leaves - 1) * per_leaf - (-tree.passes_in(tree.leaves - 1) // task_passes)
 
 
 class Pool(Generic[T]):

@@ -34,7 +34,7 @@ from .estimators import DirectLighting
 from .film import Film
 from .imagefiles import MAX_SPLIT_COUNT
 from .jit import jit
-from .record import RenderRecord, check_mergeable, merged
+from .record import RenderRecord, SampleRange, check_mergeable, merged
 from .sampler_choice import MAX_REPLICATE_COUNT
 from .scene import Scene
 from .strategy import Strategy
@@ -82,7 +82,9 @@ class RenderResult:
     nonfinite counts samples that came out NaN or infinite (they were set to 0);
     interrupted is true when Ctrl-C stopped the render early (the film keeps every finished
     batch, with its true per-pixel counts); learner holds what an estimator that learns
-    (``tracer.tuning``) has learned, for a render that continues this one (else None).
+    (``tracer.tuning``) has learned, for a render that continues this one (else None); drawn
+    lists the sample ranges this render added to the film (``tracer.record``: the film's record
+    also lists what a film passed in held), which an interrupted render says it kept.
     """
 
     film: Film
@@ -91,6 +93,7 @@ class RenderResult:
     nonfinite: int
     interrupted: bool
     learner: tuning.Learner | None = None
+    drawn: tuple[SampleRange, ...] = ()
 
 
 def pass_samples(spp: int, pixels: int, rays_per_sample: int) -> int:
@@ -219,7 +222,8 @@ def film_to_fill(scene: Scene, strategy: Strategy, settings: RenderSettings,
 
 def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Film | None = None,
            progress: bool = False, estimator: DirectLighting | None = None,
-           learner: tuning.Learner | None = None, part: merge_tree.Node | None = None) -> RenderResult:
+           learner: tuning.Learner | None = None, part: merge_tree.Task | None = None,
+           continued: Film | None = None) -> RenderResult:
     """Render ``settings.spp`` samples per pixel into ``film`` (a new one if None).
 
     The film's record (``tracer.record``) is set to describe all it holds: the strategy and
@@ -237,8 +241,14 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     The new samples are pooled along the render's merge tree (``tracer.merge_tree``) and the
     pool is then merged into ``film``. ``part``, a node of that tree, renders only its leaves
     (a task of a distributed render, ``tracer.cluster``): with the same random numbers and the
-    same bits as the whole render has there. Estimators that learn cannot render a part: what
-    they apply depends on every earlier sample.
+    same bits as the whole render has there. A part that is a segment of a leaf
+    (``merge_tree.Segment``) after its first pass continues ``continued``, the film of the
+    leaf's passes before it (not changed: a copy is continued), and the film returned holds the
+    leaf's passes up to the segment's end. Estimators that learn cannot render a part: what they
+    apply depends on every earlier sample.
+
+    Ctrl-C is never lost to a finalizer that drops its ``KeyboardInterrupt``: the loop calls
+    ``interrupts.check`` between batches (``tracer.interrupts``).
     """
     cam = scene.camera
     runs = estimator.strategy if estimator is not None else strategy
@@ -261,11 +271,11 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         if runs.learns:
             raise InputError(f"cannot render a part of a render with {runs.label}, which learns from "
                              "every earlier sample")
-        try:
-            merge_tree.check_node(tree.leaves, part)
-        except ValueError as exc:
-            raise InputError(f"cannot render part {part}: {exc}") from None
+        _check_part(tree, settings, part, continued, fresh)
     leaf = LeafFilm(tree, cam.width, cam.height, replicates, merge_tree.Pool(tree.leaves, pooled_into))
+    if continued is not None:
+        leaf.continue_leaf(part.leaf, continued)
+        earlier = continued.record
 
     def merge(batch: Batch, result: tuple[np.ndarray, int, np.ndarray | None]) -> None:
         nonlocal nonfinite, samples
@@ -292,6 +302,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
             _compile(estimator, leaf.film, sampler)
         if arrived:
             raise KeyboardInterrupt
+        interrupts.check()
         # Compiling takes ~20 s; loading from the cache up to a few seconds on a loaded machine.
         if progress and time.perf_counter() - start > 5.0:
             print(f"tracer: compiled the shading kernels in {time.perf_counter() - start:.1f} s "
@@ -328,6 +339,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
                     merge(batch, result)
                 if arrived:
                     raise KeyboardInterrupt
+                interrupts.check()
         else:
             with ThreadPoolExecutor(max_workers=threads) as pool:
                 interrupted = _run_pipelined(pool, threads, batches, estimator, sampler, merge,
@@ -337,8 +349,9 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         interrupted = True
         seconds = time.perf_counter() - start
     finally:
-        if bar is not None:
-            bar.close()
+        close_quietly(bar)
+    if interrupted:
+        interrupts.clear()  # acted on: the finished batches are kept below
     pooled = leaf.finish(complete=not interrupted)
     # Each pixel holds a prefix of its new indices (batches start in plan order and every
     # started one is merged), so an interrupted render drew first .. first + (most added) - 1.
@@ -352,7 +365,46 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     film.record = _record(scene, runs, settings, first, drawn, seconds, earlier)
     if learner is not None:
         film.learned = learner.maps()
-    return RenderResult(film, seconds, samples, nonfinite, interrupted, learner)
+    new_first = settings.first_sample + first
+    added = ((settings.seed, new_first, new_first + drawn),) if drawn else ()
+    return RenderResult(film, seconds, samples, nonfinite, interrupted, learner, added)
+
+
+def _check_part(tree: merge_tree.Layout, settings: RenderSettings, part: merge_tree.Task,
+                continued: Film | None, fresh: bool) -> None:
+    """``InputError`` unless ``part`` is a node or a segment of the render's tree and
+    ``continued`` is what a segment after a leaf's first pass needs: the film of exactly the
+    leaf's passes before it (its record says which samples it holds), into a new film
+    (``fresh``)."""
+    try:
+        if isinstance(part, merge_tree.Segment):
+            tree.check_segment(part)
+        else:
+            merge_tree.check_node(tree.leaves, part)
+    except ValueError as exc:
+        raise InputError(f"cannot render part {part}: {exc}") from None
+    needs = isinstance(part, merge_tree.Segment) and part.first_pass > 0
+    if continued is None and not needs:
+        return
+    if not needs or not fresh:
+        raise InputError(f"only a segment after a leaf's first pass continues a film, into a new one, "
+                         f"not part {part}")
+    first, stop = tree.samples(merge_tree.Segment(part.leaf, 0, part.first_pass))
+    before = ((settings.seed, settings.first_sample + first, settings.first_sample + stop),)
+    if continued is None or continued.record.samples != before:
+        held = continued.record.samples if continued is not None else "nothing"
+        raise InputError(f"part {part} continues the film of samples {before} of its leaf, not {held}")
+
+
+def close_quietly(bar) -> None:
+    """Close a progress bar (None: nothing) with Ctrl-C held back: raised there, after the loop
+    that it counted, the interrupt would escape the code that keeps the finished work. One that
+    arrives is left pending, for the command to end as interrupted (``tracer.interrupts``)."""
+    if bar is None:
+        return
+    with interrupts.deferred() as arrived:
+        bar.close()
+    interrupts.leave_pending(arrived)
 
 
 def tree_layout(scene: Scene, strategy: Strategy, settings: RenderSettings) -> merge_tree.Layout:
@@ -398,6 +450,11 @@ class LeafFilm:
             self._close()
             self.index = index
         self.film.add_block(batch.first_pixel, block, batch.first_sample)
+
+    def continue_leaf(self, index: int, film: Film) -> None:
+        """Fold the next batches into a copy of ``film``, which holds leaf ``index``'s passes
+        before them (a segment task): the leaf is then folded as if rendered whole."""
+        self.index, self.film = index, film.copy()
 
     def _close(self) -> None:
         if self.index is not None:
@@ -470,6 +527,7 @@ def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: Iterator[Bat
             merge(batch, result)
         if arrived:
             raise KeyboardInterrupt
+        interrupts.check()
 
     try:
         for batch in batches:
