@@ -54,6 +54,9 @@ Four families of cases, each a folder holding its inputs:
   ``$name`` substitutions, include chains, diamonds and cycles, FIFOs and devices, huge strings
   in every slot, polygon meshes, camera matrices near Mitsuba's rigidity tolerance, BSDF
   reference graphs, material extremes). Checks: ``tracer.load_scene`` and ``tracer render``.
+- ``scheduler``: ``tracer reference --scheduler ADDRESS`` at malformed addresses, other schemes
+  and loopback servers that speak something else (``benchmarks/fuzz_scheduler.py``). Check: one
+  line and exit 2 within the connect timeout.
 
 How they run: CLI checks in subprocesses (``python -m tracer ...``, cwd = the case folder,
 address space limited to ``--memory-gib``), ``--jobs`` at a time; in-process checks in one
@@ -71,7 +74,7 @@ signatures (exception type and tracer function, or the message with its particul
 ``DIR/outcomes.jsonl`` every outcome, ``DIR/summary.txt`` the printed report.
 
 Usage:
-    python benchmarks/fuzz.py [--seed S] [--scenes N] [--exrs N] [--baselines N] [--xmls N]
+    python benchmarks/fuzz.py [--seed S] [--scenes N] [--exrs N] [--baselines N] [--xmls N] [--schedulers N]
                               [--keep DIR] [--jobs 2] [--timeout 120]
 """
 
@@ -105,7 +108,9 @@ SCENE_DIRS = (ROOT / "tracer" / "scenes", ROOT / "tracer" / "study" / "cases")
 SHIPPED_MESH_DIR = ROOT / "tracer" / "scenes" / "meshes"
 BASELINE_FILE = ROOT / "renders" / "noise_baseline.json"
 
-FAMILIES = ("scene", "exr", "baseline", "xml")
+FAMILIES = ("scene", "exr", "baseline", "xml", "scheduler")
+# The connect timeout scheduler cases give tracer: every refusal must come within it.
+SCHEDULER_TIMEOUT = 5
 KINDS = ("ok", "refused", "traceback", "crash", "hang", "nonfinite", "multiline")
 FAILURE_KINDS = ("traceback", "crash", "hang", "nonfinite", "multiline")
 SEVERITY = {"crash": 0, "hang": 1, "nonfinite": 2, "traceback": 3, "multiline": 4}
@@ -130,6 +135,7 @@ class Check:
     outputs : files or folders (relative) that must exist and be finite after a success.
     optional_outputs : files or folders checked for finiteness if they exist.
     inputs : names a refusal may mention to count as naming the file (else a note).
+    timeout : seconds after which this check counts as a hang, if shorter than the run's.
     """
 
     name: str
@@ -139,6 +145,7 @@ class Check:
     outputs: tuple[str, ...] = ()
     optional_outputs: tuple[str, ...] = ()
     inputs: tuple[str, ...] = ()
+    timeout: float | None = None
 
 
 @dataclass
@@ -293,6 +300,7 @@ def output_problem(folder: Path, required: tuple[str, ...], optional: tuple[str,
 
 def run_cli(case: Case, check: Check, timeout: float, memory_bytes: int) -> Outcome:
     """Run ``python -m tracer ARGV`` in the case folder and classify what it did."""
+    timeout = min(timeout, check.timeout or timeout)
     command = [sys.executable, "-m", "tracer", *check.argv]
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", COLUMNS="80")
     start = time.monotonic()
@@ -1947,6 +1955,30 @@ def make_xml_case(seed: int, index: int, root: Path) -> Case:
 
 
 # =============================================================================================
+# Scheduler-address cases (the addresses and servers: benchmarks/fuzz_scheduler.py)
+
+
+def make_scheduler_case(seed: int, index: int, root: Path, servers) -> Case:
+    """Scheduler case ``index``: ``reference --scheduler`` at an address that is no Dask scheduler."""
+    import fuzz_scheduler
+
+    rng = random.Random(f"{seed}:scheduler:{index}")
+    folder = root / f"scheduler-{index:04d}"
+    folder.mkdir(parents=True)
+    address, description = fuzz_scheduler.choose(rng, servers)
+    case = Case("scheduler", index, folder, [description])
+    scene = str(ROOT / "tracer" / "scenes" / "cornell.toml")
+    argv = ["reference", scene, "-o", "ref.exr", "--spp", "1", "--width", "8", "--height", "8", "--quiet",
+            "--scheduler", address, "--connect-timeout", str(SCHEDULER_TIMEOUT)]
+    # No exit 0 is possible (nothing there is a scheduler): allowed only the refusal.
+    # It must end within its connect timeout; 55 s more for starting Python and importing Dask
+    # on a loaded machine.
+    case.checks.append(Check("cli-scheduler", argv=argv, allowed=(), timeout=SCHEDULER_TIMEOUT + 55,
+                             inputs=("command line", "scheduler", address[:40] or "address")))
+    return case
+
+
+# =============================================================================================
 # The run
 
 
@@ -1978,11 +2010,12 @@ def make_base_renders(base: Path, timeout: float) -> None:
 
 
 def build_cases(seed: int, counts: dict[str, int], root: Path, base: Path,
-                only: tuple[str, int] | None = None) -> list[Case]:
+                only: tuple[str, int] | None = None, servers=None) -> list[Case]:
     makers = {"scene": lambda i: make_scene_case(seed, i, root),
               "exr": lambda i: make_exr_case(seed, i, root, base),
               "baseline": lambda i: make_baseline_case(seed, i, root, base),
-              "xml": lambda i: make_xml_case(seed, i, root)}
+              "xml": lambda i: make_xml_case(seed, i, root),
+              "scheduler": lambda i: make_scheduler_case(seed, i, root, servers)}
     if only is not None:
         cases = [makers[only[0]](only[1])]
     else:
@@ -2089,7 +2122,7 @@ def keep_failure(outcome: Outcome, keep: Path) -> Path:
 def run(seed: int = 0, scenes: int = 300, exrs: int = 100, baselines: int = 60, jobs: int = 2,
         timeout: float = 120.0, keep: Path | None = None, memory_gib: float = 4.0,
         only: tuple[str, int] | None = None, progress: bool = True, workdir: Path | None = None,
-        xmls: int = 0) -> Report:
+        xmls: int = 0, schedulers: int = 0) -> Report:
     """Generate the cases, run every check, keep the failures' reproducers; returns the report."""
     start = time.monotonic()
     memory_bytes = int(memory_gib * (1 << 30))
@@ -2097,8 +2130,13 @@ def run(seed: int = 0, scenes: int = 300, exrs: int = 100, baselines: int = 60, 
     try:
         base = root / "base"
         make_base_renders(base, timeout)
-        counts = {"scene": scenes, "exr": exrs, "baseline": baselines, "xml": xmls}
-        cases = build_cases(seed, counts, root / "cases", base, only)
+        counts = {"scene": scenes, "exr": exrs, "baseline": baselines, "xml": xmls, "scheduler": schedulers}
+        servers = None
+        if schedulers or (only is not None and only[0] == "scheduler"):
+            import fuzz_scheduler
+
+            servers = fuzz_scheduler.Servers()
+        cases = build_cases(seed, counts, root / "cases", base, only, servers)
         probe = ProbeWorker(timeout, memory_bytes)
         outcomes: list[Outcome] = []
         done = 0
@@ -2127,6 +2165,8 @@ def run(seed: int = 0, scenes: int = 300, exrs: int = 100, baselines: int = 60, 
                     tick(future.result())
         finally:
             probe.close()
+            if servers is not None:
+                servers.close()
         report = Report(outcomes, time.monotonic() - start)
         if keep is not None:
             keep.mkdir(parents=True, exist_ok=True)
@@ -2202,6 +2242,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--exrs", type=int, default=100, help="EXR cases (default 100)")
     parser.add_argument("--baselines", type=int, default=60, help="baseline cases (default 60)")
     parser.add_argument("--xmls", type=int, default=100, help="Mitsuba XML cases (default 100)")
+    parser.add_argument("--schedulers", type=int, default=30,
+                        help="--scheduler addresses that are no Dask scheduler (default 30)")
     parser.add_argument("--jobs", type=int, default=2, help="subprocesses at a time (default 2)")
     parser.add_argument("--timeout", type=float, default=120.0,
                         help="seconds per check before it counts as a hang (default 120: the first run "
@@ -2211,7 +2253,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", type=parse_only, help="run one case, FAMILY:INDEX (e.g. scene:12)")
     args = parser.parse_args(argv)
     report = run(args.seed, args.scenes, args.exrs, args.baselines, args.jobs, args.timeout, args.keep,
-                 args.memory_gib, args.only, xmls=args.xmls)
+                 args.memory_gib, args.only, xmls=args.xmls, schedulers=args.schedulers)
     print(format_report(report, args.keep))
     return 1 if report.failures else 0
 

@@ -13,10 +13,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 fuzz = importlib.import_module("fuzz")  # by name on sys.path: its worker process imports it too
 
 
-def run_slice(tmp_path: Path, seed: int, scenes: int, exrs: int, baselines: int, xmls: int = 0) -> None:
+def run_slice(tmp_path: Path, seed: int, scenes: int, exrs: int, baselines: int, xmls: int = 0,
+              schedulers: int = 0) -> None:
     keep = tmp_path / "keep"
     report = fuzz.run(seed=seed, scenes=scenes, exrs=exrs, baselines=baselines, jobs=2, timeout=120.0,
-                      keep=keep, progress=False, workdir=tmp_path, xmls=xmls)
+                      keep=keep, progress=False, workdir=tmp_path, xmls=xmls, schedulers=schedulers)
     assert report.outcomes, "the fuzzer ran no checks"
     if report.failures:
         pytest.fail(fuzz.format_report(report, keep), pytrace=False)

@@ -352,7 +352,9 @@ class _SceneReader:
         matrix = p.transform()
         matrix = np.eye(4) if matrix is None else matrix
         linear = matrix[:3, :3]
-        if np.max(np.abs(linear @ linear.T - np.eye(3))) > RIGID_TOLERANCE:
+        # A rigid rotation's entries lie in [-1, 1]; beyond 2 (1e308 overflowed the product with a
+        # numpy warning) it is refused without forming M M^T.
+        if np.max(np.abs(linear)) > 2.0 or np.max(np.abs(linear @ linear.T - np.eye(3))) > RIGID_TOLERANCE:
             p.props["to_world"].fail("the camera's to_world scales or shears (Mitsuba refuses scale factors "
                                      "in a camera's transform too): remove the scale", element)
         origin = matrix[:3, 3]
