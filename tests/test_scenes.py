@@ -119,3 +119,23 @@ def test_a_light_too_small_for_float32_is_left_out_of_the_light_table():
     })
     tables, owner = build_tables(scene)
     assert np.all(np.isfinite(tables.rows)) and set(owner.tolist()) == {1}
+
+
+def test_a_mesh_coordinate_past_float32_is_one_line_without_warnings(tmp_path):
+    """A PLY whose float32 vertex holds 1e39 (found by the fuzzer): trimesh's cast printed a
+    numpy overflow warning on stderr before tracer's one-line refusal; now only the refusal."""
+    import warnings
+
+    from tracer.errors import InputError
+
+    (tmp_path / "m.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                    "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                                    "end_header\n0 0 0\n1 1e39 0\n0 1 0\n3 0 1 2\n")
+    scene = tmp_path / "s.toml"
+    scene.write_text('[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 40\n'
+                     '[[shapes]]\ntype = "mesh"\nfile = "m.ply"\n')
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(InputError, match="non-finite vertex"):
+            load_scene(scene)
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in caught]

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import io
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -76,7 +77,11 @@ def read_mesh_file(mesh_path: Path) -> Mesh:
         raise MeshError(f"mesh file is not a regular file (a FIFO, socket, device or folder): {mesh_path}"
                         if there else f"mesh file not found: {mesh_path}")
     try:
-        vertices, faces, normals = _load(trimesh, mesh_path)
+        # trimesh casts the file's numbers with numpy: a coordinate past float32 (1e39) prints
+        # an overflow warning on stderr. The checks below refuse what it became, in one line.
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)
+            vertices, faces, normals = _load(trimesh, mesh_path)
     except MeshError:
         raise
     except Exception as exc:  # trimesh raises many types for unreadable files
