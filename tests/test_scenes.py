@@ -139,3 +139,19 @@ def test_a_mesh_coordinate_past_float32_is_one_line_without_warnings(tmp_path):
         with pytest.raises(InputError, match="non-finite vertex"):
             load_scene(scene)
     assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in caught]
+
+
+def test_a_huge_echoed_name_gives_a_short_error_line(tmp_path):
+    """Issue 38.10: a 60 MB material name gave a 60 MB error line after 78 s. A shape naming an
+    unknown 8 MB material is refused with one line of at most errors.MAX_MESSAGE characters
+    (the name cut, its length said)."""
+    from tracer.errors import MAX_MESSAGE, InputError
+
+    scene = tmp_path / "s.toml"
+    scene.write_text('[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 40\n'
+                     '[[shapes]]\ntype = "quad"\norigin = [0, 0, 0]\nedge1 = [1, 0, 0]\nedge2 = [0, 1, 0]\n'
+                     f'material = "{"m" * 8_000_000}"\n')
+    with pytest.raises(InputError) as info:
+        load_scene(scene)
+    text = str(info.value)
+    assert len(text) <= MAX_MESSAGE + 100 and "\n" not in text and "characters" in text, text[:300]
