@@ -24,10 +24,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 # Runs in the child, against whichever tracer PYTHONPATH puts first. It imports only names that
-# both old and new trees have (tracer.estimators re-exports Strategy), or tries both names.
+# both old and new trees have (the estimator module re-exports Strategy), or tries both names.
 CHILD = """
 import sys, time
-from tracer.estimators import DirectLighting, Strategy
+try:
+    from tracer.estimator import DirectLighting, Strategy  # the package of the feature-set kernels
+except ImportError:
+    from tracer.estimators import DirectLighting, Strategy
 from tracer.scene import load_scene
 # tracer.render first: an editable install would serve the working tree's render_loop to an
 # older tree that lacks it.

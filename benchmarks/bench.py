@@ -107,7 +107,7 @@ def run_in_child(fn, *args):
 def time_tracer(scene_path: str, size: int, spp: int, strategy: str, threads: int, runs: int) -> dict:
     """Median wall time of ``runs`` renders of one strategy; also setup time and peak RSS."""
     digest = tracer_digest()
-    from tracer.estimators import DirectLighting
+    from tracer.estimator import DirectLighting
     from tracer.render_loop import RenderSettings, render
     from tracer.scene import load_scene
     from tracer.strategy import Strategy
@@ -152,7 +152,7 @@ def _recording_classes():
     import numpy as np
 
     from tracer.embree import RayCaster
-    from tracer.estimators import DirectLighting
+    from tracer.estimator import DirectLighting
 
     class RecordingCaster(RayCaster):
         """Casts like RayCaster and keeps a float32 copy of every query, batch by batch.

@@ -136,7 +136,7 @@ def build_times() -> dict:
     start = time.perf_counter()
     bvh.build(lo, hi, scene.normal, np.ones(count), np.zeros(count), scene.area)
     out["bvh_build_seconds"] = time.perf_counter() - start
-    out["bvh_depth"] = int(tables.trail_depth.max())
+    out["bvh_depth"] = int(tables.selection.trail_depth.max())
     return out
 
 

@@ -39,7 +39,7 @@ CROSS_SPP = (64, 256, 1024)
 def one_point() -> list[dict]:
     from test_estimators import ANALYTIC_SCENE, POINTS, shoot_at
 
-    from tracer.estimators import DirectLighting
+    from tracer.estimator import DirectLighting
     from tracer.scene import load_scene
     from tracer.strategy import Strategy
 

@@ -40,7 +40,7 @@ import sys, time
 t0 = time.perf_counter()
 import tracer.cli  # noqa: F401  (what the command imports first)
 from tracer.scene import load_scene
-from tracer.estimators import DirectLighting
+from tracer.estimator import DirectLighting
 from tracer.film import Film
 from tracer.imagefiles import write_exr, write_png
 from tracer import render_loop, samplers

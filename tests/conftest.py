@@ -17,6 +17,11 @@ SCENES = ROOT / "tracer" / "scenes"
 # same copy of tracer as the tests: ``python -m pytest`` in a checkout imports the checkout's,
 # while a child elsewhere would import the installed one and compile every kernel a second time
 # for it (about 100 s of CI). tests/test_packaging.py checks the installed copy holds every file.
+# The suite renders hundreds of small scenes: they share one build of the kernels per strategy and
+# sampler (``tracer.kernels.shared_builds``) instead of compiling one per scene, which took the
+# suite past 40 minutes. tests/test_kernels.py checks that a scene's own build gives the same
+# bits, and renders that way where the build itself is what it tests.
+os.environ["TRACER_KERNELS"] = "shared"
 os.environ["PYTHONPATH"] = os.pathsep.join(
     [str(Path(tracer.__file__).resolve().parent.parent), *filter(None, [os.environ.get("PYTHONPATH")])])
 

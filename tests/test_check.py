@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from tracer import estimators
+from tracer import estimator as estimators
 from tracer.cli import main
 from tracer.errors import InputError
 from tracer.scene import load_scene
@@ -106,11 +106,11 @@ def test_biased_estimator_fails(baseline_copy, monkeypatch):
     below every baseline render: only the observed split and its mirror reach the statistic,
     so p is as small as the permutations drawn resolve). The fault: the 1 / area column of the
     triangle rows of the light table."""
-    from tracer.lights import TRIANGLE_AREA, triangle_area
+    from tracer.lights.techniques import triangle_area
 
     def biased(est):
         rows = est.lights.tables.rows.copy()
-        rows[est.lights.tables.technique == TRIANGLE_AREA, triangle_area.INV_AREA] *= 1.1
+        rows[est.lights.tables.technique == triangle_area.PLUGIN.code, triangle_area.INV_AREA] *= 1.1
         est.lights.tables = est.lights.tables._replace(rows=rows)
 
     _patch_estimator(monkeypatch, biased)

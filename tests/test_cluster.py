@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_interrupts import InterruptedFinalizer
 
 from tracer import merge_tree
 from tracer import scene as scene_mod
@@ -32,7 +33,6 @@ from tracer.record import format_ranges
 from tracer.render_loop import RenderSettings, pass_samples, pooled_into, render
 from tracer.strategy import Strategy
 
-from test_interrupts import InterruptedFinalizer
 from test_merge_tree import same_film, small_scene
 
 REQUIRED = os.environ.get("TRACER_CLUSTER_TESTS") == "required"

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from tracer.estimators import DirectLighting
+from tracer.estimator import DirectLighting
 from tracer.scene import load_scene
 from tracer.strategy import Strategy
 

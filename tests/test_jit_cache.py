@@ -152,14 +152,21 @@ def test_installed_numba_supports_the_keying():
 def test_compiled_code_is_keyed_to_all_sources():
     """Compares the stamp of a real kernel's cache entry with the digest of all package sources.
     tracer's kernels inline functions of other modules, so every entry must carry that digest,
-    or an edit of lights.py would leave estimators._shade stale (it did, before tracer/jit.py);
-    it fails if the kernel got one of numba's own locators instead of tracer's."""
-    from tracer import estimators, jit
+    or an edit of lights.py would leave the shade kernel stale (it did, before tracer/jit.py);
+    it fails if a build's kernel (``tracer.kernels``) got one of numba's own locators instead of
+    tracer's."""
+    from tracer import jit
+    from tracer.estimator import kernels
+    from tracer.kernels import FeatureSet, build
 
     assert jit.CACHE
-    locator = estimators._shade._cache._impl._locator  # the dispatcher's own cache (numba internals)
+    made = build(FeatureSet(("diffuse",), ("triangle_area",), "power", "independent", "bsdf", "mis",
+                            True, True, False))
+    shade = made.function(kernels.shade)
+    locator = shade._cache._impl._locator  # the dispatcher's own cache (numba internals)
     assert type(locator).__name__.startswith("TracerStamped")
     assert locator.get_source_stamp() == jit.source_digest()
+    assert made.key in shade._cache._impl.filename_base  # the feature set's key names the entry
 
 
 @contextlib.contextmanager
@@ -210,7 +217,9 @@ def test_no_writable_cache_folder_compiles_in_memory_with_one_note(tmp_path):
     lines = err.splitlines()
     assert len(lines) == 1, err
     assert lines[0].startswith("tracer: note: cannot cache compiled kernels ("), err
-    assert str(probe / "__pycache__") in lines[0] and str(home) in lines[0], err
+    # The folder named is that of the first function given a cache in the process (tracer's own
+    # ``jit.opaque``, defined before the probe's), and the user-wide one.
+    assert f"{site}/tracer/" in lines[0] and "__pycache__" in lines[0] and str(home) in lines[0], err
     assert not (probe / "__pycache__").exists()
     assert helped.returncode == 0, helped.stderr
     assert helped.stdout.startswith("usage: tracer") and helped.stderr == ""

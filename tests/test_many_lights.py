@@ -192,7 +192,7 @@ def test_many_light_scenes_have_what_they_promise(name):
         assert (~emitting).sum() > 100  # buildings and kiosks: occluders
     else:
         assert emitting.sum() >= 10_000
-    assert sampler.tables.trail_depth.max() >= 10
+    assert sampler.tables.selection.trail_depth.max() >= 10
 
 
 def test_api_renders_ris_and_bvh_and_records_them():

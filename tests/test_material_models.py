@@ -14,7 +14,7 @@ import pytest
 from scipy import integrate, special
 from scipy import stats as sps
 
-from tracer.estimators import DirectLighting
+from tracer.estimator import DirectLighting
 from tracer.materials import Materials, microfacet
 from tracer.scene import load_scene
 from tracer.strategy import Strategy

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from tracer.cli import main
-from tracer.estimators import DirectLighting
+from tracer.estimator import DirectLighting
 from tracer.study.stability import CASE_DIR, Cell, cases, expectations, load_case, run_case, run_suite
 
 
@@ -127,14 +127,14 @@ def test_image_that_brightens_with_the_sample_count_is_caught(tmp_path, monkeypa
     is flagged as biased against the 1 + 1 reference. Only light sampling sees a point light,
     so scaling the point light's intensity in the light table by the light sample count, for
     the strategies that take more than one, has exactly that bug's effect."""
-    from tracer.lights import POINT, point
+    from tracer.lights.techniques import point
 
     original = DirectLighting.__init__
 
     def not_divided(self, scene, strategy, *args, **kwargs):
         original(self, scene, strategy, *args, **kwargs)
         rows = self.lights.tables.rows.copy()
-        points = self.lights.tables.technique == POINT
+        points = self.lights.tables.technique == point.PLUGIN.code
         rows[points, point.INTENSITY:point.INTENSITY + 3] *= max(strategy.light_count, 1)
         self.lights.tables = self.lights.tables._replace(rows=rows)
 

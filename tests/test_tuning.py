@@ -16,11 +16,12 @@ from test_estimators import ANALYTIC_SCENE, POINTS, expected_radiance, shoot_at
 
 from tracer import samplers, tuning
 from tracer.cli import main
-from tracer.estimators import DirectLighting
+from tracer.estimator import DirectLighting
 from tracer.imagefiles import read_exr
-from tracer.render_loop import Batch, RenderSettings, relearns, render
+from tracer.render_loop import Batch, RenderSettings, render
 from tracer.scene import load_scene
 from tracer.strategy import Strategy
+from tracer.tuning import relearns
 
 from stats import sidak, t_test_mean
 

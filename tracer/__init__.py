@@ -19,7 +19,7 @@ Strategy.ris(candidates, sources, **fields) -> the ris strategy
 STRATEGIES, LIGHT_SAMPLINGS, LIGHT_SELECTIONS : the strategy, light-sampling and selection names.
 
 The renderer core is the rest of this package (scene, materials, lights, samplers,
-estimators, render_loop, film, imagefiles); the study tools (compare, check, stability, primer)
+estimator, render_loop, film, imagefiles); the study tools (compare, check, stability, primer)
 are ``tracer.study``. Names are loaded on first use, so ``import tracer`` and
 ``tracer --help`` stay fast.
 """

@@ -109,12 +109,11 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
     if not isinstance(strategy, Strategy):
         sampling = light_sampling if light_sampling is not None else \
             scene.render_defaults.get("light_sampling", DEFAULT_LIGHT_SAMPLING)
-        if strategy == "ris":
-            strategy = Strategy.ris(ris_candidates, ris_sources, heuristic=heuristic,
-                                    light_selection=light_selection, light_sampling=sampling)
-        else:
-            strategy = Strategy(strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection,
-                                sampling, allocation)
+        strategy = Strategy.from_options(strategy, heuristic=heuristic, light_samples=light_samples,
+                                         bsdf_samples=bsdf_samples, one_sample=one_sample,
+                                         light_selection=light_selection, light_sampling=sampling,
+                                         allocation=allocation, ris_candidates=ris_candidates,
+                                         ris_sources=ris_sources)
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
         raise ValueError(f"spp must be a whole number >= 1, got {spp!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:

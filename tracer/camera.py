@@ -8,6 +8,7 @@ import numpy as np
 
 from . import samplers
 from .jit import jit
+from .kernels import UNBOUND, kernel
 from .samplers import dimensions
 
 
@@ -37,7 +38,7 @@ class Camera:
         return f, (-r if self.mirrored else r), np.cross(r, f)
 
     @property
-    def _screen(self) -> tuple:
+    def screen(self) -> tuple:
         """What the ray kernels need: width, height, tan(fov / 2), f, r, u."""
         return (self.width, self.height, float(np.tan(np.radians(self.fov) * 0.5))) + self.basis
 
@@ -48,15 +49,16 @@ class Camera:
         jitter : (n, 2) in [0, 1)^2, the position inside the pixel (box filter).
         Returns origins (n, 3) and unit directions (n, 3), float64.
         """
-        d = _directions(np.asarray(pixel), np.asarray(jitter, dtype=np.float64), *self._screen)
+        d = _directions(np.asarray(pixel), np.asarray(jitter, dtype=np.float64), *self.screen)
         return np.broadcast_to(self.origin, d.shape), d
 
-    def lane_rays(self, sampler: samplers.SamplerParams, pixel: np.ndarray,
+    def lane_rays(self, directions, sampler: samplers.SamplerParams, pixel: np.ndarray,
                   sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The camera rays of lanes ``(pixel[i], sample[i])`` (``(n,)`` int64 each): the jitter
-        inside the pixel is the sampler's camera dimensions (``samplers.dimensions``). Returns
-        origins and unit directions ``(n, 3)``, float32 as Embree takes them."""
-        d = _lane_directions(sampler, pixel, sample, *self._screen)
+        inside the pixel is the sampler's camera dimensions (``samplers.dimensions``), drawn by
+        ``directions``, the render's build of :func:`lane_directions` (``tracer.kernels``).
+        Returns origins and unit directions ``(n, 3)``, float32 as Embree takes them."""
+        d = directions(sampler, pixel, sample, *self.screen)
         # One contiguous array of the origin (Embree wants contiguous rows), grown to the
         # largest batch and shared by the render threads: each keeps its own reference, so a
         # race between two of them costs at most an extra allocation.
@@ -89,13 +91,19 @@ def _directions(pixel, jitter, width, height, tan_half, f, r, u) -> np.ndarray:
     return d
 
 
-@jit
-def _lane_directions(sampler, pixel, sample, width, height, tan_half, f, r, u) -> np.ndarray:
+# The camera's jitter draws on the sampler alone: one copy per sampler, whatever the scene.
+@kernel(ignores=("materials", "light_techniques", "light_selection", "direction", "combiner", "light_samples",
+                 "direction_samples", "learns"))
+def lane_directions(sampler, pixel, sample, width, height, tan_half, f, r, u) -> np.ndarray:
+    """``(n, 3)`` float32 unit directions of the camera rays of lanes ``(pixel[i], sample[i])``."""
     d = np.empty((len(pixel), 3), dtype=np.float32)
     for i in range(len(pixel)):
         p = pixel[i]
-        state = samplers.start(sampler, p, sample[i])
-        jitter = samplers.uniform_pair(sampler, state, dimensions.CAMERA_JITTER)
+        state = dispatch.start(sampler, p, sample[i])
+        jitter = dispatch.uniform_pair(sampler, state, dimensions.CAMERA_JITTER)
         d[i, 0], d[i, 1], d[i, 2] = _direction((p % width) + jitter[0], (p // width) + jitter[1],
                                                width, height, tan_half, f, r, u)
     return d
+
+
+dispatch = UNBOUND  # bound per build (``tracer.kernels``)

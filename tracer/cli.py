@@ -14,8 +14,20 @@ from pathlib import Path
 
 from . import __version__, interrupts, notices
 from .errors import InputError
-from .sampler_choice import DEFAULT_SAMPLER, SAMPLERS
+from .plugins import Names
+from .sampler_choice import DEFAULT_SAMPLER
 from .strategy import MAX_SAMPLES_PER_CAMERA_SAMPLE
+
+
+def _sampler_names():
+    from .sampler_choice import SAMPLERS
+
+    return SAMPLERS
+
+
+# The plug-ins' names, read from their registries only when an option is checked or help printed
+# (``plugins.Names``): building the parser imports no plug-in and no numba.
+SAMPLERS = Names(_sampler_names)
 
 EXIT_CHECK_FAILED = 1
 EXIT_BAD_INPUT = 2
@@ -207,8 +219,8 @@ def build_parser() -> argparse.ArgumentParser:
     ch.add_argument("--size", type=_int_in(4, 4096), default=None,
                     help="with --create: longer side of the check's images and references in pixels "
                     "(default 64)")
-    ch.add_argument("--sampler", choices=SAMPLERS, default=None,
-                    help=f"with --create: the sampler of every entry (default {DEFAULT_SAMPLER})")
+    ch.add_argument("--sampler", choices=SAMPLERS, default=None, metavar="NAME",
+                    help=f"with --create: the sampler of every entry, one of %(choices)s (default {DEFAULT_SAMPLER})")
     ch.add_argument("--out", default="check_failures", help="where the maps of failing entries go")
     ch.add_argument("--seed-offset", type=_seed, default=0,
                     help="add this to every seed (other random numbers, same statistics)")
@@ -275,10 +287,12 @@ def _add_strategy_options(p: argparse.ArgumentParser, compared: bool = False) ->
         DEFAULT_LIGHT_SAMPLING,
         DEFAULT_RIS_CANDIDATES,
         HEURISTICS,
-        LIGHT_SAMPLINGS,
-        LIGHT_SELECTIONS,
         RIS_SOURCES,
+        light_samplings,
+        light_selections,
     )
+
+    LIGHT_SAMPLINGS, LIGHT_SELECTIONS = Names(light_samplings), Names(light_selections)
 
     heuristics = "balance, power, max, or optimal (balance plus a control variate learned per pixel from " \
         "earlier passes)"
@@ -321,46 +335,43 @@ def _add_strategy_options(p: argparse.ArgumentParser, compared: bool = False) ->
                        help=f"comma-separated sources of ris's candidates: some of {ris_sources} "
                        "(default light)")
     else:
-        p.add_argument("--light-selection", choices=LIGHT_SELECTIONS, default="power",
-                       help=f"how to pick the light to sample: {selections}; default power")
+        p.add_argument("--light-selection", choices=LIGHT_SELECTIONS, default="power", metavar="NAME",
+                       help=f"how to pick the light to sample, one of %(choices)s: {selections}; default power")
         p.add_argument("--ris-candidates", type=_ris_candidates, default=DEFAULT_RIS_CANDIDATES,
                        metavar="M",
                        help=f"ris: candidates per camera sample (default {DEFAULT_RIS_CANDIDATES})")
         p.add_argument("--ris-sources", choices=RIS_SOURCES, default=RIS_SOURCES[0],
                        help=f"ris: where candidates come from: {ris_sources}; default light")
     if compared:
-        p.add_argument("--light-sampling", type=_light_samplings, default=None, metavar="LIST",
-                       help="comma-separated light-sampling techniques to compare, each with every "
-                       f"strategy that takes light samples: some of {', '.join(LIGHT_SAMPLINGS)} "
-                       f"(default: the scene's [render] light_sampling, else {DEFAULT_LIGHT_SAMPLING})")
+        listed = p.add_argument("--light-sampling", type=_names_of(LIGHT_SAMPLINGS), default=None, metavar="LIST",
+                                help="comma-separated light-sampling techniques to compare, each with every "
+                                "strategy that takes light samples: some of %(names)s "
+                                f"(default: the scene's [render] light_sampling, else {DEFAULT_LIGHT_SAMPLING})")
+        listed.names = LIGHT_SAMPLINGS  # read by the help text's %(names)s when help is printed
         return
-    p.add_argument("--light-sampling", choices=LIGHT_SAMPLINGS, default=None,
-                   help="how to sample the chosen light: by area, by the solid angle it subtends, or by "
+    p.add_argument("--light-sampling", choices=LIGHT_SAMPLINGS, default=None, metavar="NAME",
+                   help="how to sample the chosen light, one of %(choices)s: by area, by the solid angle it subtends, or by "
                    "solid angle warped toward the receiver's cosine (default: the scene's [render] "
                    f"light_sampling, else {DEFAULT_LIGHT_SAMPLING})")
-
-
-def _light_samplings(text: str) -> list[str]:
-    from .strategy import LIGHT_SAMPLINGS
-
-    return _names_of(LIGHT_SAMPLINGS)(text)
 
 
 def _add_sampler_option(p: argparse.ArgumentParser, compared: bool = False, default: str | None = None,
                         resumed: bool = False) -> None:
     """``--sampler``: one name, or with ``compared`` a comma-separated list."""
-    what = (f"{SAMPLERS[0]} (counter-based hash), {SAMPLERS[1]} (jittered strata) or {SAMPLERS[2]} "
-            "(Owen-scrambled Sobol); the variance stays honest for each (8 independent replicates)")
+    what = ("%(names)s (independent: a counter-based hash; stratified: jittered strata; sobol: "
+            "Owen-scrambled Sobol points); the variance stays honest for each (8 independent replicates)")
     if compared:
-        p.add_argument("--sampler", type=_names_of(SAMPLERS), default=None, metavar="LIST",
-                       help=f"comma-separated samplers to compare, each with every strategy: some of {what} "
-                       f"(default: the scene's [render] sampler, else {DEFAULT_SAMPLER})")
+        listed = p.add_argument("--sampler", type=_names_of(SAMPLERS), default=None, metavar="LIST",
+                                help=f"comma-separated samplers to compare, each with every strategy: some of "
+                                f"{what} (default: the scene's [render] sampler, else {DEFAULT_SAMPLER})")
+        listed.names = SAMPLERS  # read by the help text's %(names)s when help is printed
         return
     fallback = f"default {default}" if default else \
         f"default: the scene's [render] sampler, else {DEFAULT_SAMPLER}"
     kept = "; --resume keeps the file's" if resumed else ""
-    p.add_argument("--sampler", choices=SAMPLERS, default=default,
-                   help=f"where the random numbers come from: {what} ({fallback}{kept})")
+    single = p.add_argument("--sampler", choices=SAMPLERS, default=default, metavar="NAME",
+                            help=f"where the random numbers come from, one of {what} ({fallback}{kept})")
+    single.names = SAMPLERS
 
 
 def _names_of(choices: tuple[str, ...]):
@@ -462,28 +473,24 @@ def _print_note():
 def _strategy_from(args: argparse.Namespace, name: str, light_sampling: str | None = None,
                    light_selection: str | None = None, ris: tuple[int, str] | None = None,
                    heuristic: str | None = None, allocation: str | None = None):
-    """The strategy ``name`` with the command line's options; the light sampling is
-    ``light_sampling``, else ``--light-sampling``, else the default; the light selection,
-    ris's ``(candidates, sources)``, the heuristic and the allocation likewise (compare's
-    options are lists, which its caller expands)."""
-    from .strategy import DEFAULT_LIGHT_SAMPLING, DEFAULT_RIS_CANDIDATES, RIS_SOURCES, Strategy
+    """The strategy ``name`` with the command line's options (``Strategy.from_options``); the
+    light sampling is ``light_sampling``, else ``--light-sampling``, else the default; the light
+    selection, ris's ``(candidates, sources)``, the heuristic and the allocation likewise
+    (compare's options are lists, which its caller expands)."""
+    from .strategy import Strategy
 
     def given(option):
         value = getattr(args, option, None)
         return value if isinstance(value, (str, int)) else None
 
-    sampling = light_sampling or given("light_sampling") or DEFAULT_LIGHT_SAMPLING
-    selection = light_selection or given("light_selection") or "power"
-    heuristic = heuristic or given("heuristic") or "power"
-    allocation = allocation or given("allocation") or "fixed"
+    candidates, sources = ris or (given("ris_candidates"), given("ris_sources"))
     try:
-        if name == "ris":
-            candidates, sources = ris or (given("ris_candidates") or DEFAULT_RIS_CANDIDATES,
-                                          given("ris_sources") or RIS_SOURCES[0])
-            return Strategy.ris(candidates, sources, heuristic=heuristic, light_selection=selection,
-                                light_sampling=sampling)
-        return Strategy(name, heuristic, args.light_samples, args.bsdf_samples,
-                        args.one_sample, selection, sampling, allocation)
+        return Strategy.from_options(
+            name, heuristic=heuristic or given("heuristic"), light_samples=getattr(args, "light_samples", None),
+            bsdf_samples=getattr(args, "bsdf_samples", None), one_sample=getattr(args, "one_sample", None),
+            light_selection=light_selection or given("light_selection"),
+            light_sampling=light_sampling or given("light_sampling"), allocation=allocation or given("allocation"),
+            ris_candidates=candidates, ris_sources=sources)
     except ValueError as exc:
         raise InputError(str(exc), "command line") from None
 
@@ -622,7 +629,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     # renders with other options do not overwrite each other.
     seed_part = f"_seed{args.seed}" if args.seed else ""
     sampler_part = f"_{sampler}" if sampler != DEFAULT_SAMPLER else ""
-    output = _exr_path(args.output or f"{scene.name}_{strategy.file_stem}{sampler_part}{seed_part}.exr")
+    output = _exr_path(args.output or f"{scene.name}_{strategy.slug}{sampler_part}{seed_part}.exr")
     _warn_if_dark(scene)
     settings = RenderSettings(spp=spp, seed=args.seed, threads=args.threads, sampler=sampler)
     result = render(scene, strategy, settings, progress=not args.quiet)
@@ -633,11 +640,14 @@ def cmd_reference(args: argparse.Namespace) -> int:
     from . import scene as scene_mod
     from .imagefiles import read_exr
     from .render_loop import RenderSettings, render
+    from .strategy import Strategy
 
     output = _exr_path(args.output or f"{Path(args.scene).stem}_reference.exr")
     film, seed, first, sampler = None, args.seed, 0, args.sampler
-    defaults = {"heuristic": "power", "light_samples": 1, "bsdf_samples": 1, "one_sample": False,
-                "light_selection": "power", "light_sampling": None, "allocation": "fixed"}
+    # Strategy's defaults, but the light sampling: None = the scene's [render] default, else area.
+    defaults = {name: getattr(Strategy(), name) for name in ("heuristic", "light_samples", "bsdf_samples",
+                                                               "one_sample", "light_selection", "allocation")}
+    defaults["light_sampling"] = None
     width, height = args.width, args.height
     if args.resume:
         if not output.is_file():
@@ -647,10 +657,11 @@ def cmd_reference(args: argparse.Namespace) -> int:
             raise InputError("--resume: not an MIS reference", str(output))
         # The file's resolution and estimator settings, unless given (and then they must agree).
         width, height = width or film.width, height or film.height
-        defaults.update({name: getattr(film.record, name) for name in defaults
-                         if getattr(film.record, name) is not None})
-        if film.record.light_sampling is None:  # written by tracer <= 0.2, which sampled by area
-            defaults["light_sampling"] = "area"
+        try:
+            recorded = Strategy.from_record(film.record)
+        except ValueError as exc:
+            raise InputError(f"--resume: {exc}", str(output)) from None
+        defaults.update({name: getattr(recorded, name) for name in defaults})
     elif output.exists() and not args.force:
         raise InputError("a reference exists here: --resume adds samples to it, --force replaces it",
                          str(output))
@@ -767,9 +778,10 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     from .imagefiles import read_exr
-    from .strategy import CLASSIC_HEURISTICS, STRATEGIES, Strategy
+    from .strategy import STRATEGIES, Strategy
     from .study import report
-    from .study.compare import ALLOCATIONS, Comparison, independent_seeds, scene_for_reference
+    from .study.compare import ALLOCATIONS, Comparison, product_of_options
+    from .study.reference import independent_seeds, scene_for_reference
 
     names = [n.strip() for n in args.strategies.split(",") if n.strip()]
     formats = [f.strip().lower() for text in args.figure_format or [] for f in text.split(",") if f.strip()]
@@ -800,30 +812,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
     # Every strategy with every light sampling and selection asked for (those without light
     # samples once), and ris with every candidate count and source.
     samplings = args.light_sampling or [scene.render_defaults.get("light_sampling")]
-    ris_settings = [(m, sources) for sources in args.ris_sources for m in args.ris_candidates]
-    def takes_lights(name, ris):
-        return _strategy_from(args, name, ris=ris).light_count > 0
-
-    selections = args.light_selection
-    # mis runs every heuristic with every allocation; ris weighs its candidates with the first
-    # classic heuristic given (optimal weights can be negative).
-    classic = [h for h in args.heuristic if h in CLASSIC_HEURISTICS]
-    if not classic and "ris" in names and "light+bsdf" in args.ris_sources:
-        raise InputError("--heuristic: ris weights its light and BSDF candidates with balance, power or max "
-                         "(optimal weights may be negative); add one of them to the list", "command line")
-    classic = classic or ["power"]
-
-    def weightings(name):
-        if name == "mis":
-            return [(h, a) for h in args.heuristic for a in args.allocation]
-        return [(classic[0] if name == "ris" else "power", "fixed")]
-
-    strategies = [_strategy_from(args, name, sampling, selection, ris, heuristic, allocation)
-                  for name in names
-                  for ris in (ris_settings if name == "ris" else [None])
-                  for heuristic, allocation in weightings(name)
-                  for sampling in (samplings if takes_lights(name, ris) else samplings[:1])
-                  for selection in (selections if takes_lights(name, ris) else selections[:1])]
+    try:
+        strategies, ris_heuristic = product_of_options(
+            names, heuristics=args.heuristic, allocations=args.allocation, light_samplings=samplings,
+            light_selections=args.light_selection,
+            ris_settings=[(m, sources) for sources in args.ris_sources for m in args.ris_candidates],
+            light_samples=args.light_samples, bsdf_samples=args.bsdf_samples, one_sample=args.one_sample)
+    except ValueError as exc:
+        raise InputError(str(exc), "command line") from None
     sampler_names = args.sampler or [scene.render_defaults.get("sampler", DEFAULT_SAMPLER)]
 
     mode = report.describe_mode(args.spp, args.time, args.clock)
@@ -835,7 +831,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
             calls = [run(strategy, sampler) for strategy, sampler in items]
             if args.sweep:
                 first_sampling = _strategy_from(args, "mis", samplings[0]).light_sampling
-                calls += [run(Strategy("mis", classic[0], n_light, n_bsdf,
+                calls += [run(Strategy("mis", ris_heuristic, n_light, n_bsdf,
                                        light_selection=args.light_selection[0],
                                        light_sampling=first_sampling), sampler_names[0])
                           for n_light, n_bsdf in ALLOCATIONS]

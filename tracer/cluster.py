@@ -36,7 +36,7 @@ from typing import Any
 
 from . import interrupts, merge_tree
 from .errors import InputError, shown
-from .estimators import DirectLighting
+from .estimator import DirectLighting
 from .film import Film
 from .record import merged
 from .render_loop import (

@@ -159,7 +159,7 @@ def _spheres_block(blocked, origins, dirs, tmax, spheres) -> None:
 class SceneRays:
     """Closest hits and occlusion against a scene's triangles and analytic spheres, or with
     ``emitters_only`` against its emitting ones alone (the occluders left out: where a direction
-    meets the first emitter, as ris's BSDF candidates need, ``tracer.estimators``).
+    meets the first emitter, as ris's BSDF candidates need, ``tracer.estimator``).
 
     caster : the Embree scene of the triangles (built here unless given).
     spheres : (S, 4) float64 centre and radius.   first_sphere : the local id of sphere 0.

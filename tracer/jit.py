@@ -271,7 +271,24 @@ def jit_called(py_func):
     return _cached(_compile_called(py_func))
 
 
+def jit_generated(py_func):
+    """As :func:`jit`, without a cache of its own: for the generated dispatch chains
+    (``tracer.kernels.dispatch``), which have no source file to key a cache entry to and are
+    inlined into the kernels, whose entries hold them."""
+    return _compile(py_func)
+
+
 def _cached(dispatcher):
     if CACHE and hasattr(dispatcher, "_cache"):
         _attach_cache(dispatcher)
     return dispatcher
+
+
+@jit_called
+def opaque(flag: bool) -> bool:
+    """``flag`` as a value numba knows only at run time. numba types a constant True or False
+    passed to a compiled function as a literal and compiles the function once for each value
+    (measured: the warped solid-angle techniques compiled twice, 20 s more); passed through
+    this, the callers of both values share one compilation. (A comparison, because numba keeps
+    a literal type through a function that returns its argument as it is.)"""
+    return flag == True  # noqa: E712

@@ -115,12 +115,7 @@ class RenderRecord:
         that drew samples ``first_sample .. first_sample + spp - 1`` with ``seed``."""
         from . import __version__
 
-        return cls(strategy=strategy.name,
-                   heuristic=strategy.recorded_heuristic,
-                   light_samples=int(strategy.light_count), bsdf_samples=int(strategy.direction_count),
-                   one_sample=bool(strategy.one_sample), light_selection=strategy.light_selection,
-                   light_sampling=strategy.recorded_light_sampling, allocation=strategy.allocation,
-                   sampler=sampler, samples=((int(seed), int(first_sample), int(first_sample + spp)),),
+        return cls(**strategy.to_record(), sampler=sampler, samples=((int(seed), int(first_sample), int(first_sample + spp)),),
                    seconds=float(seconds), scene=str(scene.path), scene_digest=scene.digest,
                    version=__version__)
 

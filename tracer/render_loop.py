@@ -30,7 +30,7 @@ import numpy as np
 
 from . import interrupts, merge_tree, samplers, tuning
 from .errors import InputError
-from .estimators import DirectLighting
+from .estimator import DirectLighting
 from .film import Film
 from .imagefiles import MAX_SPLIT_COUNT
 from .jit import jit
@@ -137,7 +137,7 @@ def render_batch(estimator: DirectLighting, batch: Batch, sampler: samplers.Samp
     learns the batch's per-pixel sums if the tuning collects them (``tracer.tuning.reduce_lanes``;
     else None)."""
     pixel, sample = lanes_of(batch)
-    origins, dirs = estimator.scene.camera.lane_rays(sampler, pixel, sample)
+    origins, dirs = estimator.camera_rays(sampler, pixel, sample)
     radiance, lane_stats = estimator.shade_lanes(origins, dirs, sampler, pixel, sample, tuned)
     sums = None
     if estimator.learns:
@@ -152,18 +152,13 @@ def render_batch(estimator: DirectLighting, batch: Batch, sampler: samplers.Samp
     return radiance.reshape(batch.npix, batch.k, 3), nonfinite, sums
 
 
-def relearns(batch: Batch, first_sample: int, k: int) -> bool:
-    """Whether an estimator that learns learns again before ``batch``: before the first batch
-    of passes 1, 2, 4, 8, ... of a render whose passes of ``k`` samples begin at
-    ``first_sample``."""
-    index, offset = divmod(batch.first_sample - first_sample, k)
-    return batch.first_pixel == 0 and offset == 0 and index > 0 and index & (index - 1) == 0
-
-
-def _compile(estimator: DirectLighting, film: Film, sampler: samplers.SamplerParams) -> None:
-    """Run a batch's kernels once on zero lanes before the clock starts, so that numba compiles
-    them (or loads them from its cache) then: the first render after an install would otherwise
+def _compile(estimator: DirectLighting, film: Film, sampler: samplers.SamplerParams,
+             progress: bool = False) -> None:
+    """Compile the render's kernels (or load them from the cache) before the clock starts, with
+    a progress line while they compile (``DirectLighting.compile``), then run a batch once on
+    zero lanes for whatever else it calls: the first render after an install would otherwise
     count seconds of compilation as rendering, unfair in an equal-time comparison."""
+    estimator.compile(sampler, progress)
     sums = render_batch(estimator, Batch(0, 1, 0, 0), sampler, tuning.no_tuning())[2]
     film.add_block(0, np.zeros((0, 1, 3)))
     if sums is not None:  # the learning's own kernels
@@ -264,6 +259,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     seconds = 0.0
 
     continues = learner is not None
+    hook: tuning.PassHook | None = None  # set once the estimator is known to learn
     tree = tree_layout(scene, runs, settings)
     k = tree.k
     first, stop = tree.samples(part) if part is not None else (0, settings.spp)
@@ -282,7 +278,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         block, bad, sums = result
         leaf.add_block(batch, block, settings.first_sample)
         if sums is not None:
-            learner.add(batch.first_pixel, sums)
+            hook.add(batch, sums)
         nonfinite += bad
         samples += batch.lanes
         if bar is not None:
@@ -299,51 +295,20 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         # leaves it broken): a signal during the compilation stops the render right after it.
         with interrupts.deferred("tracer: interrupted; stopping as soon as the kernels are compiled"
                                  if progress else None) as arrived:
-            _compile(estimator, leaf.film, sampler)
+            _compile(estimator, leaf.film, sampler, progress)
         if arrived:
             raise KeyboardInterrupt
         interrupts.check()
-        # Compiling takes ~20 s; loading from the cache up to a few seconds on a loaded machine.
-        if progress and time.perf_counter() - start > 5.0:
-            print(f"tracer: compiled the shading kernels in {time.perf_counter() - start:.1f} s "
-                  "(once after an install or an edit; later runs load them from the cache)", file=sys.stderr)
         bar = progress_bar(cam.width * cam.height * (stop - first), progress)
         start = time.perf_counter()
-        if estimator.learns and learner is None:
-            plan = estimator.plan
-            learner = tuning.Learner(cam.width * cam.height, cam.width, replicates,
-                                     plan.c_light if plan.one_sample else plan.n_light, plan.total,
-                                     plan.optimal, plan.adaptive)
-        elif not estimator.learns:
-            learner = None
+        if estimator.learns:
+            options = dict(first_sample=settings.first_sample, k=k, spp=settings.spp, continues=continues)
+            hook = tuning.PassHook(learner, **options) if learner is not None else \
+                tuning.PassHook.of(estimator.plan, cam.width, cam.height, replicates, **options)
         threads = max(1, settings.threads)
-
-        passes = -(-settings.spp // k)
-
-        def learns_before(batch: Batch) -> bool:
-            return learner is not None and not learner.settled and relearns(batch, settings.first_sample, k)
-
-        def learn(batch: Batch | None) -> tuning.Tuning:
-            # Statistics are collected only while a later pass (or a render that continues
-            # this one) will learn from them.
-            index = 0 if batch is None else (batch.first_sample - settings.first_sample) // k
-            return learner.tuning(collect=continues or max(1, 2 * index) < passes)
-
-        if threads == 1:
-            tuned = learn(None) if learner is not None else None
-            for batch in batches:
-                if learns_before(batch):
-                    tuned = learn(batch)
-                result = render_batch(estimator, batch, sampler, tuned)
-                with interrupts.deferred() as arrived:  # a batch is merged whole or not at all
-                    merge(batch, result)
-                if arrived:
-                    raise KeyboardInterrupt
-                interrupts.check()
-        else:
-            with ThreadPoolExecutor(max_workers=threads) as pool:
-                interrupted = _run_pipelined(pool, threads, batches, estimator, sampler, merge,
-                                             learn if learner is not None else None, learns_before)
+        # One executor whatever the thread count: one thread is a pool of one.
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            interrupted = _run_pipelined(pool, threads, batches, estimator, sampler, merge, hook)
         seconds = time.perf_counter() - start
     except KeyboardInterrupt:
         interrupted = True
@@ -363,6 +328,7 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     elif pooled is not None:
         film.merge(pooled)
     film.record = _record(scene, runs, settings, first, drawn, seconds, earlier)
+    learner = hook.learner if hook is not None else (learner if runs.learns else None)
     if learner is not None:
         film.learned = learner.maps()
     new_first = settings.first_sample + first
@@ -507,15 +473,15 @@ def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, offset: 
 
 def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: Iterator[Batch],
                    estimator: DirectLighting, sampler: samplers.SamplerParams, merge,
-                   learn=None, learns_before=None) -> bool:
+                   hook: tuning.PassHook | None = None) -> bool:
     """Keep 2 x threads batches in flight and merge them in submission order; for an estimator
-    that learns, before each batch for which ``learns_before(batch)``, merge every batch in
-    flight, then ``learn(batch)`` the tuning the next batches apply.
+    that learns (``hook``), before each batch the hook relearns before, merge every batch in
+    flight, then take the tuning the hook gives the next batches.
 
     Returns True if Ctrl-C stopped it; then the batches already started are awaited and kept.
     """
     in_flight: deque[tuple[Batch, Future]] = deque()
-    tuned = learn(None) if learn is not None else None
+    tuned = hook.first() if hook is not None else None
 
     def merge_oldest() -> None:
         # The wait is interruptible; taking the batch off the queue and merging it are not, so
@@ -531,10 +497,10 @@ def _run_pipelined(pool: ThreadPoolExecutor, threads: int, batches: Iterator[Bat
 
     try:
         for batch in batches:
-            if learn is not None and learns_before(batch):
+            if hook is not None and hook.relearns(batch):
                 while in_flight:
                     merge_oldest()
-                tuned = learn(batch)
+                tuned = hook.before(batch)
             in_flight.append((batch, pool.submit(render_batch, estimator, batch, sampler, tuned)))
             if len(in_flight) >= 2 * threads:
                 merge_oldest()

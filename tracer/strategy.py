@@ -2,11 +2,11 @@
 
 This module holds names and validation only (no numba), so that the command line can list the
 choices in ``--help`` without compiling anything. The estimator that runs a strategy is
-``tracer.estimators``; the heuristics themselves are ``tracer.mis``.
+``tracer.estimator``; the heuristics themselves are ``tracer.mis``.
 
 A strategy is a pair of sample counts per camera sample (Mitsuba's ``emitter_samples`` and
 ``bsdf_samples``) and the technique that draws the directions; for ``ris`` the counts are of
-candidates, of which one is kept and shadow-tested (``tracer.estimators``):
+candidates, of which one is kept and shadow-tested (``tracer.estimator``):
 
 =========  ==============  =================  ===============================
 strategy   light samples   direction samples  direction technique
@@ -33,14 +33,39 @@ CLASSIC_HEURISTICS = HEURISTICS[:3]
 # How the light and BSDF samples of mis are split (``tracer.tuning``): the counts given, or per
 # pixel from what earlier passes measured.
 ALLOCATIONS = ("fixed", "adaptive")
-LIGHT_SELECTIONS = ("power", "uniform", "bvh")
 # Where ris's candidates come from (``Strategy.ris``): light samples only, or both techniques.
 RIS_SOURCES = ("light", "light+bsdf")
 DEFAULT_RIS_CANDIDATES = 16
-# How a chosen light is sampled (``tracer.lights``): by area, by solid angle, or by solid angle
-# warped toward the receiver's cosine.
-LIGHT_SAMPLINGS = ("area", "solid-angle", "solid-angle-cos")
+# How a chosen light is sampled (``tracer.lights``: by area, by solid angle, or by solid angle
+# warped toward the receiver's cosine) and chosen (``tracer.lights.selections``): the names come
+# from the plug-ins' registry (``LIGHT_SAMPLINGS``, ``LIGHT_SELECTIONS``, looked up on first use).
 DEFAULT_LIGHT_SAMPLING = "area"
+DEFAULT_LIGHT_SELECTION = "power"
+DEFAULT_HEURISTIC = "power"
+
+
+def light_samplings() -> tuple[str, ...]:
+    """Every ``--light-sampling`` value: each name a light technique lists."""
+    from .lights import light_samplings as offered
+
+    return offered()
+
+
+def light_selections() -> tuple[str, ...]:
+    """Every ``--light-selection`` value: the registered light selections."""
+    from . import plugins
+
+    return plugins.names("light_selection")
+
+
+def __getattr__(name: str):
+    # PEP 562: the plug-in names are looked up when asked for, so importing this module (for
+    # the command line's strategy names) loads no compiled code.
+    if name == "LIGHT_SAMPLINGS":
+        return light_samplings()
+    if name == "LIGHT_SELECTIONS":
+        return light_selections()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 # The most light or direction samples (ris: candidates) a camera sample may take: a render's
 # buffers grow with the count, and a million already takes one lane per batch. The command line,
 # the API and render files (``tracer.record``) are held to it alike.
@@ -77,11 +102,11 @@ class Strategy:
     """
 
     name: str = "mis"
-    heuristic: str = "power"
+    heuristic: str = DEFAULT_HEURISTIC
     light_samples: int = 1
     bsdf_samples: int = 1
     one_sample: bool = False
-    light_selection: str = "power"
+    light_selection: str = DEFAULT_LIGHT_SELECTION
     light_sampling: str = DEFAULT_LIGHT_SAMPLING
     allocation: str = "fixed"
 
@@ -90,12 +115,12 @@ class Strategy:
             raise ValueError(f"unknown strategy {self.name!r}; expected one of {', '.join(STRATEGIES)}")
         if self.heuristic not in HEURISTICS:
             raise ValueError(f"unknown heuristic {self.heuristic!r}; expected one of {', '.join(HEURISTICS)}")
-        if self.light_selection not in LIGHT_SELECTIONS:
+        if self.light_selection not in light_selections():
             raise ValueError(f"unknown light selection {self.light_selection!r}; "
-                             f"expected one of {', '.join(LIGHT_SELECTIONS)}")
-        if self.light_sampling not in LIGHT_SAMPLINGS:
+                             f"expected one of {', '.join(light_selections())}")
+        if self.light_sampling not in light_samplings():
             raise ValueError(f"unknown light sampling {self.light_sampling!r}; "
-                             f"expected one of {', '.join(LIGHT_SAMPLINGS)}")
+                             f"expected one of {', '.join(light_samplings())}")
         for field_name in ("light_samples", "bsdf_samples"):
             count = getattr(self, field_name)
             if isinstance(count, bool) or not isinstance(count, int) or not 0 <= count <= MAX_SAMPLES_PER_CAMERA_SAMPLE:
@@ -153,31 +178,75 @@ class Strategy:
         return f"{self.name} ({', '.join(parts)})" if parts else self.name
 
     @property
-    def file_stem(self) -> str:
-        """A file-name part that tells this strategy's settings apart from the defaults':
-        ``mis``, ``mis_balance``, ``mis_l2_b1_one-sample``, ``light_x4_uniform-lights``."""
-        parts = [self.name]
-        if self.name == "mis":
-            if self.heuristic != "power":
-                parts.append(self.heuristic)
-            if (self.light_samples, self.bsdf_samples) != (1, 1):
-                parts.append(f"l{self.light_samples}_b{self.bsdf_samples}")
+    def slug(self) -> str:
+        """This strategy's one name in files, table rows and curves: its name, then what differs
+        from the defaults, ``mis``, ``mis_balance``, ``mis_l2_b1_one-sample``, ``ris_m16``,
+        ``mis_optimal_adaptive``, ``light_x4_solid-angle_uniform-lights``. Equal slugs are equal
+        strategies (``to_record``), so no two files or rows of a study share one."""
+        count = self.light_count or self.direction_count
+        if self.name == "ris":
+            parts = [self.name, f"l{self.light_samples}_b{self.bsdf_samples}" if self.bsdf_samples
+                     else f"m{self.light_samples}"]
+        elif self.name == "mis":
+            parts = [self.name] + ([] if (self.light_samples, self.bsdf_samples) == (1, 1)
+                                   else [f"l{self.light_samples}_b{self.bsdf_samples}"])
             if self.one_sample:
                 parts.append("one-sample")
-            if self.adaptive:
-                parts.append("adaptive")
-        elif self.name == "ris":
-            parts.append(f"l{self.light_samples}_b{self.bsdf_samples}" if self.bsdf_samples
-                         else f"m{self.light_samples}")
-            if self.bsdf_samples and self.heuristic != "power":
-                parts.append(self.heuristic)
-        elif (self.light_count or self.direction_count) != 1:
-            parts.append(f"x{self.light_count or self.direction_count}")
-        if self.light_count and self.light_selection != "power":
-            parts.append(f"{self.light_selection}-lights")
+        else:
+            parts = [self.name] + ([f"x{count}"] if count != 1 else [])
+        if self.recorded_heuristic not in ("none", DEFAULT_HEURISTIC):
+            parts.append(self.heuristic)
+        if self.adaptive:
+            parts.append("adaptive")
         if self.light_count and self.light_sampling != DEFAULT_LIGHT_SAMPLING:
             parts.append(self.light_sampling)
+        if self.light_count and self.light_selection != DEFAULT_LIGHT_SELECTION:
+            parts.append(f"{self.light_selection}-lights")
         return "_".join(parts)
+
+    @classmethod
+    def from_options(cls, name: str = "mis", *, heuristic: str | None = None, light_samples: int | None = None,
+                     bsdf_samples: int | None = None, one_sample: bool | None = None,
+                     light_selection: str | None = None, light_sampling: str | None = None,
+                     allocation: str | None = None, ris_candidates: int | None = None,
+                     ris_sources: str | None = None) -> "Strategy":
+        """The strategy of the command line's, the API's and a check entry's options, None
+        meaning the default (the field defaults of this class, ``DEFAULT_RIS_CANDIDATES``,
+        ``RIS_SOURCES[0]``). ``ris`` takes its counts from ``ris_candidates`` and
+        ``ris_sources``, the others from ``light_samples`` and ``bsdf_samples``. Raises
+        ``ValueError`` naming the bad option."""
+        given = {"heuristic": heuristic, "light_selection": light_selection, "light_sampling": light_sampling}
+        given = {k: v for k, v in given.items() if v is not None}
+        if name == "ris":
+            return cls.ris(DEFAULT_RIS_CANDIDATES if ris_candidates is None else ris_candidates,
+                           RIS_SOURCES[0] if ris_sources is None else ris_sources, **given)
+        counts = {"light_samples": light_samples, "bsdf_samples": bsdf_samples, "one_sample": one_sample,
+                  "allocation": allocation}
+        return cls(name, **given, **{k: v for k, v in counts.items() if v is not None})
+
+    def to_record(self) -> dict[str, object]:
+        """The record's estimator fields (``tracer.record.ESTIMATOR_FIELDS`` but the sampler): the
+        counts this strategy takes, and ``none`` for a heuristic or light sampling it does not use."""
+        return {"strategy": self.name, "heuristic": self.recorded_heuristic, "light_samples": int(self.light_count),
+                "bsdf_samples": int(self.direction_count), "one_sample": bool(self.one_sample),
+                "light_selection": self.light_selection, "light_sampling": self.recorded_light_sampling,
+                "allocation": self.allocation}
+
+    @classmethod
+    def from_record(cls, record) -> "Strategy":
+        """The strategy of a render record (``tracer.record.RenderRecord``, or a mapping of its
+        fields), with the defaults where a file from an older tracer leaves a field out; a render
+        of it pools with the recorded one (``record.check_mergeable``). Raises ``ValueError``."""
+        def field(name: str):
+            value = record.get(name) if isinstance(record, dict) else getattr(record, name, None)
+            return None if value in (None, "none") else value
+
+        if field("strategy") is None:
+            raise ValueError("the record names no strategy")
+        return cls(field("strategy"), **{name: field(name) for name in
+                                         ("heuristic", "light_samples", "bsdf_samples", "one_sample",
+                                          "light_selection", "light_sampling", "allocation")
+                                         if field(name) is not None})
 
     @property
     def light_count(self) -> int:

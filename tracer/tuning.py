@@ -4,7 +4,7 @@ Both settle, per pixel, something the classic estimator fixes in advance: the we
 (``--heuristic optimal``) and the split of a camera sample's N = n_l + n_b technique samples
 between light and BSDF sampling (``--allocation adaptive``). Both learn it from the passes
 already rendered and apply it to the passes that follow, learning again after passes 1, 2, 4,
-8, ... (``render_loop.relearns``). Random numbers are independent across sample indices, so
+8, ... (``relearns``). Random numbers are independent across sample indices, so
 what a pass uses is independent of its own samples and each pass is unbiased for *any* value
 learned; the learning changes the variance only. The first pass (the pilot) has nothing to
 learn from: it runs the balance heuristic and the fixed counts. Statistics are gathered only
@@ -233,6 +233,55 @@ class Learner:
         return out
 
 
+def relearns(batch, first_sample: int, k: int) -> bool:
+    """Whether an estimator that learns learns again before ``batch`` (a ``render_loop.Batch``):
+    before the first batch of passes 1, 2, 4, 8, ... of a render whose passes of ``k`` samples
+    begin at ``first_sample``."""
+    index, offset = divmod(batch.first_sample - first_sample, k)
+    return batch.first_pixel == 0 and offset == 0 and index > 0 and index & (index - 1) == 0
+
+
+class PassHook:
+    """The render loop's hook for an estimator that learns between passes (``render_loop``): the
+    tuning of the first pass (``first``), whether to learn again before a batch (``relearns``:
+    the loop then merges every batch in flight first) and what that gives (``before``), and the
+    sums each merged batch adds (``add``).
+
+    learner : the ``Learner`` (a render that continues another passes that one's).
+    first_sample, k, spp : the render's first sample index, samples per pass, samples per pixel.
+    continues : a later render continues this one, so statistics are collected to the end.
+    """
+
+    def __init__(self, learner: Learner, first_sample: int, k: int, spp: int, continues: bool):
+        self.learner, self.first_sample, self.k = learner, first_sample, k
+        self.passes = -(-spp // k)
+        self.continues = continues
+
+    @classmethod
+    def of(cls, plan, width: int, height: int, replicates: int, **options) -> "PassHook":
+        """A hook with a fresh ``Learner`` for the estimator plan ``plan`` (``estimator.Plan``)."""
+        learner = Learner(width * height, width, replicates, plan.c_light if plan.one_sample else plan.n_light,
+                          plan.total, plan.optimal, plan.adaptive)
+        return cls(learner, **options)
+
+    def first(self) -> Tuning:
+        return self._tuning(0)
+
+    def relearns(self, batch) -> bool:
+        return not self.learner.settled and relearns(batch, self.first_sample, self.k)
+
+    def before(self, batch) -> Tuning:
+        return self._tuning((batch.first_sample - self.first_sample) // self.k)
+
+    def add(self, batch, sums: np.ndarray) -> None:
+        self.learner.add(batch.first_pixel, sums)
+
+    def _tuning(self, index: int) -> Tuning:
+        # Statistics are collected only while a later pass (or a render that continues this one)
+        # will learn from them.
+        return self.learner.tuning(collect=self.continues or max(1, 2 * index) < self.passes)
+
+
 @jit
 def control_coefficient(sums, light_count, light_samples: float, swap: bool):
     """(P, G, 3) a = -S_VC / (S_CC + ``PSEUDO_SAMPLES`` / n_l^2) from per-pixel sums ``(P, G,
@@ -327,6 +376,30 @@ def _running_sum(source, target, length: int, radius: int) -> None:
             running -= source[leave]
         if i >= 0:
             target[i] = running
+
+
+@jit
+def mean_square(raw, w: float) -> float:
+    """The mean over channels of (w x raw)^2: a sample's squared balance value, when ``raw``
+    is its unweighted value and w its balance weight."""
+    return ((raw[0] * w) ** 2 + (raw[1] * w) ** 2 + (raw[2] * w) ** 2) / 3.0
+
+
+@jit
+def learn(lane_stats, lane: int, shares, collect: bool, control: float, v2: float, share_t: float,
+          share: float) -> None:
+    """Add to a lane's statistics one sample that carries light: its term of the control
+    variate C, and if ``collect``, for every candidate share c its estimate of the second
+    moment M(c), v^2 (a t + (1 - a)(1 - t)) / (c t + (1 - c)(1 - t)) with a = ``share``, the
+    share of light samples it was taken under (module docstring). The estimator's kernels call
+    it only in builds that learn (``tracer.estimator.kernels``)."""
+    lane_stats[lane, CONTROL] += control
+    if not collect:
+        return
+    used = share * share_t + (1.0 - share) * (1.0 - share_t)
+    for k in range(len(shares)):
+        c = shares[k]
+        lane_stats[lane, FIRST_SHARE + k] += v2 * used / (c * share_t + (1.0 - c) * (1.0 - share_t))
 
 
 def warm_up() -> None:

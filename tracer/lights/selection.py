@@ -1,4 +1,5 @@
-"""Which light to sample: a discrete distribution over the emitter candidates.
+"""Which light to sample: the discrete distributions of the ``power`` and ``uniform`` light
+selections (``tracer.lights.selections``), drawn from Walker's alias table.
 
 - ``power`` (default): each candidate in proportion to the flux it emits, pi * area * mean(Le)
   for an emitting triangle and 4 pi * mean(I) for a point light, so bright lights get more
@@ -14,9 +15,44 @@ selection probability is multiplied into the light pdf by ``tracer.lights``, whe
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ..jit import jit
+
+
+class AliasTables(NamedTuple):
+    """Walker's table of a selection pmf over K candidates: ``alias_prob (K,)`` float64,
+    ``alias (K,)`` int64, and ``pmf (K,)`` float64 the probabilities."""
+
+    alias_prob: np.ndarray
+    alias: np.ndarray
+    pmf: np.ndarray
+
+
+def alias_tables(selection: str, candidates) -> AliasTables:
+    """The alias table of ``selection`` (``power`` or ``uniform``) over ``candidates``
+    (``tracer.lights.emitters.Candidates``)."""
+    weight = weights(selection, candidates.flux, candidates.owner, candidates.area)
+    pmf = weight / weight.sum() if len(weight) else weight
+    alias_prob, alias = alias_table(pmf)
+    return AliasTables(alias_prob, alias, pmf)
+
+
+@jit
+def alias_choose(sel, x, n_receiver, u: float):
+    """``(k, pmf_k)`` of an alias table's candidate for ``u`` (the point does not matter);
+    ``(-1, 0.0)`` without candidates."""
+    if len(sel.alias) == 0:
+        return -1, 0.0
+    k = pick(sel.alias_prob, sel.alias, u)
+    return k, sel.pmf[k]
+
+
+@jit
+def alias_pmf(sel, k: int, x, n_receiver) -> float:
+    return sel.pmf[k]
 
 
 def weights(selection: str, flux: np.ndarray, light: np.ndarray, area: np.ndarray) -> np.ndarray:

@@ -1,7 +1,8 @@
 """Materials behind one interface (``base.py`` says what a material type declares).
 
-One module per material type, one registry (``TYPES``) and one dispatch on the material code
-(:func:`eval_pdf`, :func:`sample`), in the manner of pbrt-v4's BxDFs:
+One module per material type, each a plug-in (``tracer.plugins``) that registers its
+``MaterialType``; the kernels' dispatch over the types a scene uses is generated
+(``tracer.kernels.dispatch``), in the manner of pbrt-v4's BxDFs:
 
 ================  ====  ==============================================================
 type              code  module
@@ -20,14 +21,14 @@ Fresnel terms); ``presets.py`` the named metals of Mitsuba scenes. A material is
 (TOML) or one-sided, black from behind its shading normal (Mitsuba's rule):
 ``MaterialTable.twosided``, applied by the estimator, not by the types.
 
-Adding a material: a module with ``CODE``, ``TYPE``, ``eval_pdf`` and ``sample``; its ``TYPE`` in
-``TYPES`` below; a branch in :func:`eval_pdf` and :func:`sample`. The scene reader reads its
-parameters from ``TYPE.params``; ``tests/test_sampling.py`` checks the interface's contract
-(sample weight = f cos / pdf, sample pdf = pdf) on every type in ``TYPES``, and a new type adds
-its own chi-square test there.
+Adding a material: one module here with ``CODE``, ``TYPE = register(MaterialType(...))``,
+``eval_pdf`` and ``sample`` (found by ``plugins.discover``: nothing else to edit). The scene
+reader reads its parameters from ``TYPE.params``; ``tests/test_sampling.py`` checks the
+interface's contract (sample weight = f cos / pdf, sample pdf = pdf) on every registered type,
+and a new type adds its own chi-square test there.
 
 The batch API (:class:`Materials`) runs the same compiled code over arrays of lanes, for tests
-and tools.
+and tools, built for the types of its table.
 """
 
 from __future__ import annotations
@@ -36,52 +37,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..jit import jit
-from . import conductor, diffuse, mirror, plastic, roughconductor, roughplastic
+from .. import plugins
+from ..kernels import UNBOUND, kernel
 from .base import DELTA, DIFFUSE, GLOSSY, MaterialTable, MaterialType, Param
 
 NONE = 0  # the code of the black material
-TYPES: dict[str, MaterialType] = {t.name: t for t in (diffuse.TYPE, roughconductor.TYPE, mirror.TYPE,
-                                                      conductor.TYPE, plastic.TYPE, roughplastic.TYPE)}
-BY_CODE = {t.code: t for t in TYPES.values()}
-assert len(BY_CODE) == len(TYPES) and NONE not in BY_CODE, "material codes must be unique and > 0"
-
-
-@jit
-def eval_pdf(kind: int, params, row: int, wo, wi):
-    """``(f, pdf)`` of the material in ``row`` (code ``kind``): RGB f(wo, wi) without the
-    cosine and the solid-angle pdf of sampling wi (``base.py``). 0 for the black material."""
-    if kind == diffuse.CODE:
-        return diffuse.eval_pdf(params, row, wo, wi)
-    if kind == roughconductor.CODE:
-        return roughconductor.eval_pdf(params, row, wo, wi)
-    if kind == mirror.CODE:
-        return mirror.eval_pdf(params, row, wo, wi)
-    if kind == conductor.CODE:
-        return conductor.eval_pdf(params, row, wo, wi)
-    if kind == plastic.CODE:
-        return plastic.eval_pdf(params, row, wo, wi)
-    if kind == roughplastic.CODE:
-        return roughplastic.eval_pdf(params, row, wo, wi)
-    return (0.0, 0.0, 0.0), 0.0
-
-
-@jit
-def sample(kind: int, params, row: int, wo, u_lobe: float, u0: float, u1: float):
-    """``(wi, weight, pdf, flags)`` sampled from the material in ``row`` (``base.py``)."""
-    if kind == diffuse.CODE:
-        return diffuse.sample(params, row, wo, u_lobe, u0, u1)
-    if kind == roughconductor.CODE:
-        return roughconductor.sample(params, row, wo, u_lobe, u0, u1)
-    if kind == mirror.CODE:
-        return mirror.sample(params, row, wo, u_lobe, u0, u1)
-    if kind == conductor.CODE:
-        return conductor.sample(params, row, wo, u_lobe, u0, u1)
-    if kind == plastic.CODE:
-        return plastic.sample(params, row, wo, u_lobe, u0, u1)
-    if kind == roughplastic.CODE:
-        return roughplastic.sample(params, row, wo, u_lobe, u0, u1)
-    return (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0
+# Every registered material type by name and by code, a live view (a user's type registered
+# later is there too).
+TYPES = plugins.Live("material")
+BY_CODE = plugins.Live("material", by="code")
 
 
 def table(materials: list[tuple[str, str, dict[str, object]]], twosided: list[bool] | None = None
@@ -188,13 +152,21 @@ class Materials:
         lobe = np.array([lobes(int(k)) for k in self.table.kind])[self.row]
         return lobe == DELTA
 
+    def _kernel(self, template):
+        """``template`` built for the material types of this table (``tracer.kernels``)."""
+        from ..kernels import FeatureSet, build
+
+        names = tuple(BY_CODE[int(k)].name for k in sorted(set(self.table.kind.tolist())) if int(k) in BY_CODE)
+        features = FeatureSet(names, (), "power", "independent", None, "sum", False, False, False)
+        return build(features).function(template)
+
     def eval(self, wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
         """f(wo, wi) without the cosine, ``(n, 3)``; zero below the surface and for delta lobes."""
-        return _eval_pdf_lanes(self.table.kind, self.table.params, self.row, wo, wi)[0]
+        return self._kernel(_eval_pdf_lanes)(self.table.kind, self.table.params, self.row, wo, wi)[0]
 
     def pdf(self, wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
         """Solid-angle pdf with which :meth:`sample` picks ``wi``, ``(n,)``; 0 for delta lobes."""
-        return _eval_pdf_lanes(self.table.kind, self.table.params, self.row, wo, wi)[1]
+        return self._kernel(_eval_pdf_lanes)(self.table.kind, self.table.params, self.row, wo, wi)[1]
 
     def sample(self, u: np.ndarray, wo: np.ndarray) -> MaterialSample:
         """Importance-sample ``wi`` given ``wo (n, 3)``, with ``u (n, 3)`` in [0, 1)^3: the lobe
@@ -206,32 +178,34 @@ class Materials:
             if np.any(lobe_bits > 1):
                 raise ValueError("materials with several lobes need u (n, 3): a lobe choice and a direction")
             u = np.concatenate([np.zeros((len(u), 1)), u], axis=1)
-        return MaterialSample(*_sample_lanes(self.table.kind, self.table.params, self.row, wo, u))
+        return MaterialSample(*self._kernel(_sample_lanes)(self.table.kind, self.table.params, self.row, wo, u))
 
 
-@jit
+@kernel
 def _eval_pdf_lanes(kind, params, row, wo, wi):
     n = len(row)
     f, p = np.empty((n, 3)), np.empty(n)
     for i in range(n):
-        value, p[i] = eval_pdf(kind[row[i]], params, row[i], (wo[i, 0], wo[i, 1], wo[i, 2]),
+        value, p[i] = dispatch.material_eval_pdf(kind[row[i]], params, row[i], (wo[i, 0], wo[i, 1], wo[i, 2]),
                                (wi[i, 0], wi[i, 1], wi[i, 2]))
         f[i, 0], f[i, 1], f[i, 2] = value
     return f, p
 
 
-@jit
+@kernel
 def _sample_lanes(kind, params, row, wo, u):
     n = len(row)
     wi, weight, p = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
     flags = np.empty(n, dtype=np.int64)
     for i in range(n):
-        w, value, p[i], flags[i] = sample(kind[row[i]], params, row[i], (wo[i, 0], wo[i, 1], wo[i, 2]),
+        w, value, p[i], flags[i] = dispatch.material_sample(kind[row[i]], params, row[i], (wo[i, 0], wo[i, 1], wo[i, 2]),
                                           u[i, 0], u[i, 1], u[i, 2])
         wi[i, 0], wi[i, 1], wi[i, 2] = w
         weight[i, 0], weight[i, 1], weight[i, 2] = value
     return wi, weight, p, flags
 
 
+dispatch = UNBOUND  # bound per build (``tracer.kernels``)
+
 __all__ = ["DELTA", "DIFFUSE", "GLOSSY", "NONE", "TYPES", "MaterialSample", "MaterialTable", "MaterialType",
-           "Materials", "Param", "eval_pdf", "lobes", "sample", "table"]
+           "Materials", "Param", "lobes", "table"]

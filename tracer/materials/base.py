@@ -30,6 +30,7 @@ from typing import Callable
 import numpy as np
 
 from ..jit import jit
+from ..plugins import Plugin
 
 # Lobe flags (a bit set): what a sampled lobe, or a material's lobes, are.
 DELTA, GLOSSY, DIFFUSE = 1, 2, 4
@@ -86,22 +87,23 @@ class Param:
 
 
 @dataclass(frozen=True)
-class MaterialType:
-    """A material type: ``name`` as scene files spell it, ``code`` as kernels dispatch on it,
-    ``params`` laid out in columns in this order, ``lobes`` the flags of every lobe it has.
+class MaterialType(Plugin):
+    """A material type, a plug-in (``tracer.plugins``): ``name`` as scene files spell it,
+    ``code`` as kernels dispatch on it (stable: scene digests hold it), ``module`` the module of
+    its ``eval_pdf`` and ``sample``, ``params`` laid out in columns in this order, ``lobes`` the
+    flags of every lobe it has; a direction sample of it draws 3 numbers (lobe, direction).
 
     derived : columns computed from the parameters once per material (tables, constants that
         kernels would otherwise recompute per sample), after the parameters in each row;
         ``derive(values) -> {name: value}`` fills them from the parameters by name.
     """
 
-    name: str
-    code: int
-    params: tuple[Param, ...]
-    lobes: int
-    doc: str = ""
+    params: tuple[Param, ...] = ()
+    lobes: int = 0
     derived: tuple[Param, ...] = ()
     derive: Callable[[dict[str, object]], dict[str, object]] | None = None
+    dims: int = 3
+    kind: str = "material"
 
     def column(self, name: str) -> int:
         """First column of parameter (or derived column) ``name`` in this type's rows."""

@@ -17,6 +17,7 @@ k              3      imaginary part (absorption) per channel, >= 0
 from __future__ import annotations
 
 from ..jit import jit, jit_called
+from ..plugins import register
 from . import microfacet
 from .base import DELTA, MaterialType, Param, rgb
 
@@ -27,10 +28,10 @@ CODE = 4  # the dispatch code (``tracer.materials``)
 MAX_INDEX = 1000.0
 ETA_PARAM = Param("eta", 3, lo=0.0, hi=MAX_INDEX, default=0.0, doc="real part of the complex index of refraction")
 K_PARAM = Param("k", 3, lo=0.0, hi=MAX_INDEX, default=1.0, doc="imaginary part of the complex index of refraction")
-TYPE = MaterialType(
+TYPE = register(MaterialType(module=__name__, rank=CODE, name=
     "conductor", code=CODE, lobes=DELTA, doc="smooth metal: specular reflection times conductor Fresnel",
     params=(Param("reflectance", 3, lo=0.0, hi=1.0, default=1.0, doc="scale per channel"),
-            ETA_PARAM, K_PARAM))
+            ETA_PARAM, K_PARAM)))
 REFLECTANCE, ETA, K = TYPE.column("reflectance"), TYPE.column("eta"), TYPE.column("k")
 
 

@@ -11,11 +11,12 @@ from __future__ import annotations
 
 from .. import warp
 from ..jit import jit
+from ..plugins import register
 from .base import DIFFUSE, MaterialType, Param, rgb
 
 CODE = 1  # the dispatch code (``tracer.materials``)
-TYPE = MaterialType("diffuse", code=CODE, lobes=DIFFUSE, doc="Lambertian: f = reflectance / pi",
-                    params=(Param("reflectance", 3, lo=0.0, hi=1.0, doc="albedo per channel"),))
+TYPE = register(MaterialType(module=__name__, rank=CODE, name="diffuse", code=CODE, lobes=DIFFUSE, doc="Lambertian: f = reflectance / pi",
+                    params=(Param("reflectance", 3, lo=0.0, hi=1.0, doc="albedo per channel"),)))
 REFLECTANCE = TYPE.column("reflectance")
 
 

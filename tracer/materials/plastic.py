@@ -34,6 +34,7 @@ import numpy as np
 
 from .. import warp
 from ..jit import jit, jit_called
+from ..plugins import register
 from . import microfacet
 from .base import DELTA, DIFFUSE, MaterialType, Param, rgb
 
@@ -68,8 +69,8 @@ def _derive(values: dict[str, object]) -> dict[str, object]:
     return out
 
 
-TYPE = MaterialType("plastic", code=CODE, lobes=DELTA | DIFFUSE, doc="diffuse base under a smooth coating",
-                    params=COATING_PARAMS, derived=COATING_DERIVED, derive=_derive)
+TYPE = register(MaterialType(module=__name__, rank=CODE, name="plastic", code=CODE, lobes=DELTA | DIFFUSE, doc="diffuse base under a smooth coating",
+                    params=COATING_PARAMS, derived=COATING_DERIVED, derive=_derive))
 DIFFUSE_REFLECTANCE = TYPE.column("diffuse_reflectance")
 SPECULAR_REFLECTANCE = TYPE.column("specular_reflectance")
 NONLINEAR, ETA, INV_ETA2 = TYPE.column("nonlinear"), TYPE.column("eta"), TYPE.column("inv_eta2")

@@ -35,6 +35,7 @@ import numpy as np
 
 from .. import warp
 from ..jit import jit, jit_called
+from ..plugins import register
 from . import microfacet
 from .base import DIFFUSE, GLOSSY, MaterialType, Param, rgb
 from .plastic import COATING_PARAMS, base_albedo, coating_constants, specular_probability
@@ -59,7 +60,7 @@ def _derive(values: dict[str, object]) -> dict[str, object]:
     return out
 
 
-TYPE = MaterialType(
+TYPE = register(MaterialType(module=__name__, rank=CODE, name=
     "roughplastic", code=CODE, lobes=GLOSSY | DIFFUSE, doc="diffuse base under a rough coating",
     params=COATING_PARAMS + (
         Param("alpha", 1, lo=microfacet.MIN_ALPHA, hi=microfacet.MAX_ALPHA, default=0.1, doc="coating roughness"),
@@ -67,7 +68,7 @@ TYPE = MaterialType(
               doc="microfacet distribution")),
     derived=(Param("eta", 1), Param("inv_eta2", 1), Param("specular_weight", 1),
              Param("internal_reflectance", 1), Param("transmittance", TABLE_SIZE)),
-    derive=_derive)
+    derive=_derive))
 DIFFUSE_REFLECTANCE = TYPE.column("diffuse_reflectance")
 SPECULAR_REFLECTANCE = TYPE.column("specular_reflectance")
 NONLINEAR, ALPHA, DISTRIBUTION = TYPE.column("nonlinear"), TYPE.column("alpha"), TYPE.column("distribution")

@@ -1,18 +1,19 @@
 """Samplers: where every random number of a render comes from.
 
-Interface: a random number is ``u(seed, pixel, sample index, dimension)`` in [0, 1). A
-kernel starts a lane with ``start(sampler, pixel, sample)``, which returns the lane's state
-``(key, index, spare)`` (a 64-bit key and the point index the sampler works with), and draws
-dimension d with ``uniform(sampler, state, d)`` (a pair, d even, with ``uniform_pair``); which
-dimension feeds which decision is ``tracer.samplers.dimensions``. Because numbers depend on
+Interface (each sampler is a plug-in module here, ``tracer.plugins``): a random number is
+``u(seed, pixel, sample index, dimension)`` in [0, 1). A kernel starts a lane with
+``dispatch.start(sampler, pixel, sample)``, which returns the lane's state ``(key, index,
+spare)`` (a 64-bit key and the point index the sampler works with), and draws dimension d with
+``dispatch.uniform(sampler, state, d)`` (a pair, d even, with ``uniform_pair``), bound to the
+render's sampler (``tracer.kernels``); which dimension feeds which decision is
+``tracer.samplers.dimensions``. Because numbers depend on
 (pixel, sample) and not on the batch a lane runs in, the same seed gives the same image bit
 for bit at any batch size and thread count.
 
 A sampler reaches compiled code as a :class:`SamplerParams` (its code, what it was seeded
-with, and for ``stratified`` the render's grid). Adding a sampler: a module here with
-``NAME``, ``uniform`` and ``uniform_pair``, its name in ``tracer.sampler_choice.SAMPLERS`` (and
-its replicates in ``replicates_of``; its code is its index there), and a branch in
-:func:`start`, :func:`uniform` and :func:`uniform_pair`.
+with, and for ``stratified`` the render's grid). Adding a sampler: one module here that
+registers a ``plugins.Sampler`` (its name, replicates and index limit) and defines ``start``,
+``uniform`` and ``uniform_pair``; nothing else to edit.
 
 =============  ====  ==========  ===============================================================
 name           code  replicates  what
@@ -39,11 +40,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .. import plugins
 from ..jit import jit
-from ..sampler_choice import DEFAULT_SAMPLER, REPLICATES, SAMPLERS, max_samples, replicates_of
-from . import dimensions, independent, sobol, stratified
+from ..kernels import UNBOUND, kernel
+from ..sampler_choice import DEFAULT_SAMPLER, REPLICATES, max_samples, replicates_of
+from . import dimensions, stratified
 
-INDEPENDENT, STRATIFIED, SOBOL = (SAMPLERS.index(m.NAME) for m in (independent, stratified, sobol))
+SAMPLERS = plugins.names("sampler")
 
 
 class SamplerParams(NamedTuple):
@@ -74,11 +77,15 @@ def seed_key(seed: int) -> np.uint64:
 def make(name: str, seed: int, first_sample: int = 0, spp: int = 1) -> SamplerParams:
     """The sampler called ``name`` (one of ``SAMPLERS``) seeded with ``seed``, for a render of
     sample indices ``first_sample .. first_sample + spp - 1``."""
-    if name not in SAMPLERS:
-        raise ValueError(f"unknown sampler {name!r}; expected one of {', '.join(SAMPLERS)}")
-    replicates = replicates_of(name)
+    plugin = plugins.get("sampler", name)
+    replicates = plugin.replicates
     nx, ny = stratified.grid(-(-spp // replicates)) if name == stratified.NAME else (1, 1)
-    return SamplerParams(SAMPLERS.index(name), seed_key(seed), replicates, int(first_sample), nx, ny)
+    return SamplerParams(plugins.names("sampler").index(name), seed_key(seed), replicates, int(first_sample), nx, ny)
+
+
+def name_of(sampler: SamplerParams) -> str:
+    """The name of the sampler ``sampler`` was made of (its code is its place in the registry)."""
+    return plugins.names("sampler")[sampler.code]
 
 
 ONE_BELOW = 1.0 - 2.0 ** -53  # the largest float64 below 1
@@ -95,64 +102,29 @@ def reuse(u: float, p: float, took: bool) -> float:
     return min((u - p) / (1.0 - p), ONE_BELOW)
 
 
-@jit
-def start(sampler: SamplerParams, pixel: int, sample: int):
-    """The state ``(key, index, 0)`` of the lane that takes sample ``sample`` of pixel
-    ``pixel``: for ``independent`` the lane's hash and the sample; for the others the key of
-    the sample's replicate (and, for ``stratified``, of the render's set) and its point index
-    in the replicate (in the render's set)."""
-    if sampler.code == INDEPENDENT:
-        return independent.start(sampler.seed_key, pixel, sample), sample, 0
-    r = sample % sampler.replicates
-    key = independent.start(sampler.seed_key, pixel, r)
-    index = sample // sampler.replicates
-    if sampler.code == STRATIFIED:
-        # The render's first point of replicate r: ceil((first_sample - r) / R), at least 0.
-        first = max(0, (sampler.first_sample - r + sampler.replicates - 1) // sampler.replicates)
-        key = independent.mix64(key + np.uint64(first + 1) * independent.GOLDEN_GAMMA)
-        index -= first
-    return key, index, 0
-
-
-@jit
-def uniform(sampler: SamplerParams, state, dim: int) -> float:
-    """Dimension ``dim`` of a lane whose state is ``state``: uniform in [0, 1)."""
-    if sampler.code == SOBOL:
-        return sobol.uniform(state[0], state[1], dim)
-    if sampler.code == STRATIFIED:
-        return stratified.uniform(state[0], state[1], dim, sampler.nx, sampler.ny)
-    return independent.uniform(state[0], dim)
-
-
-@jit
-def uniform_pair(sampler: SamplerParams, state, dim: int):
-    """Dimensions ``dim`` and ``dim + 1`` (``dim`` even: one pair of ``dimensions``) of a lane:
-    the same two numbers as two calls of :func:`uniform`, drawn together so that a sampler that
-    works per pair does the pair's work once."""
-    if sampler.code == SOBOL:
-        return sobol.uniform_pair(state[0], state[1], dim)
-    if sampler.code == STRATIFIED:
-        return stratified.uniform_pair(state[0], state[1], dim, sampler.nx, sampler.ny)
-    return independent.uniform(state[0], dim), independent.uniform(state[0], dim + 1)
-
-
-@jit
+@kernel
 def _uniform_lanes(sampler, pixel, sample, dims, out):
     for i in range(len(pixel)):
-        state = start(sampler, pixel[i], sample[i])
+        state = dispatch.start(sampler, pixel[i], sample[i])
         for j in range(len(dims)):
-            out[i, j] = uniform(sampler, state, dims[j])
+            out[i, j] = dispatch.uniform(sampler, state, dims[j])
 
 
 def uniforms(sampler: SamplerParams, pixel: np.ndarray, sample: np.ndarray, dims) -> np.ndarray:
     """``(n, len(dims))`` float64: the numbers of lanes ``(pixel[i], sample[i])`` in dimensions
     ``dims``, exactly as the kernels draw them (for tests and tools)."""
+    from ..kernels import FeatureSet, build
+
+    features = FeatureSet((), (), "power", name_of(sampler), None, "sum", False, False, False)
     pixel = np.asarray(pixel, dtype=np.int64)
     out = np.empty((len(pixel), len(dims)))
-    _uniform_lanes(sampler, pixel, np.broadcast_to(np.asarray(sample, dtype=np.int64), pixel.shape),
-                   np.asarray(dims, dtype=np.int64), out)
+    build(features).function(_uniform_lanes)(
+        sampler, pixel, np.broadcast_to(np.asarray(sample, dtype=np.int64), pixel.shape),
+        np.asarray(dims, dtype=np.int64), out)
     return out
 
 
+dispatch = UNBOUND  # bound per build (``tracer.kernels``)
+
 __all__ = ["DEFAULT_SAMPLER", "REPLICATES", "SAMPLERS", "SamplerParams", "dimensions", "make", "max_samples",
-           "replicates_of", "seed_key", "start", "uniform", "uniform_pair", "uniforms"]
+           "name_of", "replicates_of", "reuse", "seed_key", "uniforms"]

@@ -15,8 +15,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..jit import jit
+from ..plugins import Sampler, register
 
 NAME = "independent"
+PLUGIN = register(Sampler(NAME, module=__name__, rank=0, replicates=0, doc="independent uniforms (SplitMix64)"))
 GOLDEN_GAMMA = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
@@ -33,13 +35,32 @@ def mix64(z: np.uint64) -> np.uint64:
 
 
 @jit
-def start(seed_key: np.uint64, pixel: int, sample: int) -> np.uint64:
-    """The state of the lane that takes sample ``sample`` of pixel ``pixel``."""
+def lane_key(seed_key: np.uint64, pixel: int, sample: int) -> np.uint64:
+    """The key of the stream of the lane that takes sample ``sample`` of pixel ``pixel``."""
     return mix64(mix64(seed_key ^ np.uint64(pixel)) + np.uint64(sample) * GOLDEN_GAMMA)
 
 
 @jit
-def uniform(state: np.uint64, dim: int) -> float:
-    """Uniform in [0, 1): dimension ``dim`` of a lane's stream, with 53 random bits."""
-    z = mix64(state + np.uint64(dim + 1) * GOLDEN_GAMMA)
+def stream_uniform(key: np.uint64, dim: int) -> float:
+    """Uniform in [0, 1): dimension ``dim`` of the stream of ``key``, with 53 random bits."""
+    z = mix64(key + np.uint64(dim + 1) * GOLDEN_GAMMA)
     return float(np.int64(z >> _S11)) * _TO_UNIT  # signed: one instruction, exact below 2^53
+
+
+# The sampler interface (``tracer.samplers``).
+
+
+@jit
+def start(sampler, pixel: int, sample: int):
+    """The lane's state ``(key, sample, 0)``: the key of its own stream."""
+    return lane_key(sampler.seed_key, pixel, sample), sample, 0
+
+
+@jit
+def uniform(sampler, state, dim: int) -> float:
+    return stream_uniform(state[0], dim)
+
+
+@jit
+def uniform_pair(sampler, state, dim: int):
+    return stream_uniform(state[0], dim), stream_uniform(state[0], dim + 1)

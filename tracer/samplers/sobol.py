@@ -35,9 +35,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..jit import jit, jit_called
+from ..plugins import Sampler, register
+from ..sampler_choice import REPLICATES, SOBOL_MAX_INDEX
 from .independent import GOLDEN_GAMMA, mix64
+from .replicates import replicate_start
 
 NAME = "sobol"
+PLUGIN = register(Sampler(NAME, module=__name__, rank=2, replicates=REPLICATES, max_samples=REPLICATES * SOBOL_MAX_INDEX, doc="Owen-scrambled Sobol points per pair of dimensions, 8 replicates"))
 _M32 = np.uint64(0xFFFFFFFF)
 _BYTE = np.uint64(0xFF)
 _S8, _S16, _S24 = np.uint64(8), np.uint64(16), np.uint64(24)
@@ -133,7 +137,7 @@ def _pair_point(key: np.uint64, index: int, dim: int, both: bool):
 
 
 @jit_called
-def uniform_pair(key: np.uint64, index: int, dim: int):
+def point_pair(key: np.uint64, index: int, dim: int):
     """Dimensions ``dim`` and ``dim + 1`` (``dim`` even: a pair) of point ``index`` of the
     replicate whose key is ``key``: a point of [0, 1)^2."""
     x, y, low = _pair_point(key, index, dim, True)
@@ -142,10 +146,30 @@ def uniform_pair(key: np.uint64, index: int, dim: int):
 
 
 @jit_called
-def uniform(key: np.uint64, index: int, dim: int) -> float:
+def point(key: np.uint64, index: int, dim: int) -> float:
     """Dimension ``dim`` of point ``index`` of the replicate whose key is ``key``: in [0, 1)
     (the pair's other coordinate is not computed when ``dim`` is its first)."""
     if dim & 1:
-        return uniform_pair(key, index, dim - 1)[1]
+        return point_pair(key, index, dim - 1)[1]
     x, _, low = _pair_point(key, index, dim, False)
     return float(np.int64((x << _S21) | (low >> _S43))) * _TO_UNIT
+
+
+# The sampler interface (``tracer.samplers``).
+
+
+@jit
+def start(sampler, pixel: int, sample: int):
+    """The lane's state ``(key, index, 0)``: its replicate's key and its point index there."""
+    key, index = replicate_start(sampler, pixel, sample)
+    return key, index, 0
+
+
+@jit
+def uniform(sampler, state, dim: int) -> float:
+    return point(state[0], state[1], dim)
+
+
+@jit
+def uniform_pair(sampler, state, dim: int):
+    return point_pair(state[0], state[1], dim)

@@ -28,9 +28,13 @@ import math
 import numpy as np
 
 from ..jit import jit, jit_called
+from ..plugins import Sampler, register
+from ..sampler_choice import REPLICATES
 from .independent import GOLDEN_GAMMA, mix64
+from .replicates import replicate_start
 
 NAME = "stratified"
+PLUGIN = register(Sampler(NAME, module=__name__, rank=1, replicates=REPLICATES, doc="jittered strata per pair of dimensions, 8 replicates"))
 _ONE_BELOW = 1.0 - 2.0**-53
 _M32, _S32 = np.uint64(0xFFFFFFFF), np.uint64(32)
 _TO_UNIT32 = 2.0**-32
@@ -80,7 +84,7 @@ def permute(j: int, n: int, key: np.uint64) -> int:
 
 
 @jit_called
-def uniform_pair(key: np.uint64, j: int, dim: int, nx: int, ny: int):
+def point_pair(key: np.uint64, j: int, dim: int, nx: int, ny: int):
     """Dimensions ``dim`` and ``dim + 1`` (``dim`` even) of point ``j`` of a replicate's
     stratified set (key ``key``): its cell of the pair's permutation, jittered uniformly."""
     pair = mix64(key + np.uint64(dim // 2 + 1) * GOLDEN_GAMMA)
@@ -92,7 +96,32 @@ def uniform_pair(key: np.uint64, j: int, dim: int, nx: int, ny: int):
 
 
 @jit_called
-def uniform(key: np.uint64, j: int, dim: int, nx: int, ny: int) -> float:
+def point(key: np.uint64, j: int, dim: int, nx: int, ny: int) -> float:
     """Dimension ``dim`` of point ``j`` of a replicate's stratified set (key ``key``)."""
-    u = uniform_pair(key, j, dim - (dim & 1), nx, ny)
+    u = point_pair(key, j, dim - (dim & 1), nx, ny)
     return u[dim & 1]
+
+
+# The sampler interface (``tracer.samplers``).
+
+
+@jit
+def start(sampler, pixel: int, sample: int):
+    """The lane's state ``(key, index, 0)``: the key of its replicate's set of this render (its
+    first point, ``first_sample``, keys it) and the sample's point index in that set."""
+    key, index = replicate_start(sampler, pixel, sample)
+    r = sample % sampler.replicates
+    # The render's first point of replicate r: ceil((first_sample - r) / R), at least 0.
+    first = max(0, (sampler.first_sample - r + sampler.replicates - 1) // sampler.replicates)
+    key = mix64(key + np.uint64(first + 1) * GOLDEN_GAMMA)
+    return key, index - first, 0
+
+
+@jit
+def uniform(sampler, state, dim: int) -> float:
+    return point(state[0], state[1], dim, sampler.nx, sampler.ny)
+
+
+@jit
+def uniform_pair(sampler, state, dim: int):
+    return point_pair(state[0], state[1], dim, sampler.nx, sampler.ny)

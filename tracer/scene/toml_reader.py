@@ -17,13 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from .. import materials
+from .. import materials, sampler_choice, strategy
 from ..camera import Camera
 from ..errors import InputError
 from ..inputfiles import read_regular_file
 from ..record import MAX_SAMPLE_INDEX
-from ..sampler_choice import SAMPLERS
-from ..strategy import LIGHT_SAMPLINGS, STRATEGIES
 from .icosphere import unit_icosphere
 from .mesh import Mesh, MeshError, angle_weighted_normals, read_mesh_file
 from .model import Scene, Shape
@@ -242,11 +240,11 @@ def _read_render(r: _Reader) -> dict[str, Any]:
         # Sample indices stop at 2^53, where counts stay exact (tracer.record.MAX_SAMPLE_INDEX).
         out["spp"] = r.number("spp", lo=1, hi=MAX_SAMPLE_INDEX, integer=True)
     if r.has("strategy"):
-        out["strategy"] = r.string("strategy", STRATEGIES)
+        out["strategy"] = r.string("strategy", strategy.STRATEGIES)
     if r.has("light_sampling"):
-        out["light_sampling"] = r.string("light_sampling", LIGHT_SAMPLINGS)
+        out["light_sampling"] = r.string("light_sampling", strategy.light_samplings())
     if r.has("sampler"):
-        out["sampler"] = r.string("sampler", SAMPLERS)
+        out["sampler"] = r.string("sampler", sampler_choice.SAMPLERS)
     r.done()
     return out
 

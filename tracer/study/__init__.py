@@ -1,6 +1,6 @@
 """Study tools: code that measures the renderer rather than being it.
 
-The renderer core (``tracer.scene``, ``tracer.estimators``, ``tracer.render_loop``, ``tracer.film``,
+The renderer core (``tracer.scene``, ``tracer.estimator``, ``tracer.render_loop``, ``tracer.film``,
 ...) computes images; the modules here run it and judge what comes out:
 
 - ``metrics``: noise and error measures (MSE, relMSE, variance, efficiency, ratio maps);

@@ -81,9 +81,9 @@ import numpy as np
 
 from ..atomic import write_text
 from ..errors import InputError
-from ..inputfiles import read_regular_file
 from ..film import Film, merge_renders
 from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
+from ..inputfiles import read_regular_file
 from ..render_loop import RenderResult, RenderSettings, render_complete
 from ..sampler_choice import DEFAULT_SAMPLER, SAMPLERS, replicates_of
 from ..scene import Scene, default_scene_path, load_scene
@@ -96,7 +96,7 @@ from ..strategy import (
     Strategy,
 )
 from . import metrics, statistics
-from .compare import scene_for_reference
+from .reference import scene_for_reference
 from .statistics import FAMILY_ALPHA
 
 PIXEL_PASS_SHARE = 0.9975  # Mitsuba 3's share of pixels that must pass the z-test
@@ -154,8 +154,7 @@ class Entry:
         return f"{self.scene}/{label}"
 
     def strategy_object(self) -> Strategy:
-        return Strategy(self.strategy, self.heuristic, self.light_samples, self.bsdf_samples,
-                        light_sampling=self.light_sampling, light_selection=self.light_selection)
+        return Strategy.from_record(self)
 
     def reference_key(self) -> str:
         """The reference file, relative to the baseline's folder."""
@@ -816,7 +815,7 @@ def parse_strategies(text: str) -> list[tuple[str, str]]:
 
 def reference_size(scene: Scene, size: int) -> tuple[int, int]:
     """The scene's frame with its longer side ``size`` pixels (the aspect ratio kept to within
-    one pixel's rounding, as ``compare.scene_for_reference`` asks)."""
+    one pixel's rounding, as ``reference.scene_for_reference`` asks)."""
     w, h = scene.camera.width, scene.camera.height
     if w >= h:
         return size, max(1, round(size * h / w))

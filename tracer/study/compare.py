@@ -33,97 +33,20 @@ import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..embree import RayCaster
-from ..errors import InputError
-from ..estimators import DirectLighting
+from ..estimator import DirectLighting
 from ..film import Film
-from ..record import MAX_SAMPLE_INDEX, MAX_SEED
+from ..record import MAX_SAMPLE_INDEX
 from ..render_loop import RenderResult, RenderSettings, render_complete
 from ..sampler_choice import DEFAULT_SAMPLER
-from ..scene import Scene, load_scene
-from ..strategy import DEFAULT_LIGHT_SAMPLING, Strategy
+from ..scene import Scene
+from ..strategy import Strategy
 from . import metrics
-
-
-def scene_for_reference(scene_path: str | Path, reference_path: str | Path, reference: Film,
-                        downsample: int = 1, quiet: bool = False) -> Scene:
-    """The scene, loaded to render at the reference's resolution / ``downsample``, after
-    checking that the reference is of it: the same scene digest (when the reference records
-    one; otherwise a note says it cannot be checked), the same aspect ratio as the scene's
-    camera, to within one pixel's rounding (a reference of the same frame at another size is
-    fine, and a note says so), and at least 2 samples in every pixel (a reference interrupted
-    in its first pass has pixels without any, and one sample gives no variance to correct
-    with). A reference not made with MIS gets a note: it shares the blind spots of its
-    strategy (point lights for bsdf). ``InputError`` naming the reference file otherwise."""
-    if reference.spp < 2:
-        raise InputError(f"the reference has pixels with {reference.spp} sample(s); it needs at least 2 in "
-                         "every pixel (grow it with tracer reference --resume)", str(reference_path))
-    scene = load_scene(scene_path)
-    digest = reference.record.scene_digest
-    if digest is not None and digest != scene.digest:
-        raise InputError(f"tracer:scene_digest: the reference is of another scene "
-                         f"({reference.record.scene}) than {scene_path}", str(reference_path))
-    if digest is None and not quiet:
-        print(f"tracer: note: {reference_path} does not record its scene's digest (made by another tool "
-              "or an older tracer): it cannot be checked to be of this scene", file=sys.stderr)
-    if reference.record.strategy not in (None, "mis") and not quiet:
-        print(f"tracer: note: {reference_path} was rendered with {reference.record.strategy}, not mis: it "
-              "misses what that strategy cannot see", file=sys.stderr)
-    width, height = scene.camera.width, scene.camera.height
-    aspect = width / height
-    # The same frame: one side of the reference is the other times the aspect ratio, rounded.
-    if abs(reference.width - reference.height * aspect) > 0.5 and \
-            abs(reference.height - reference.width / aspect) > 0.5:
-        raise InputError(f"the reference is {reference.width}x{reference.height}, the scene's camera "
-                         f"{width}x{height}: another aspect ratio, so another image", str(reference_path))
-    size = (reference.width // downsample, reference.height // downsample)
-    if (reference.width, reference.height) != (width, height) and not quiet:
-        print(f"tracer: note: rendering at the reference's {reference.width}x{reference.height}, "
-              f"not the scene's {width}x{height}", file=sys.stderr)
-    scene.camera = dataclasses.replace(scene.camera, width=size[0], height=size[1])
-    return scene
-
-
-def independent_seed(reference: Film, seed: int | None, reference_path: str | Path) -> int:
-    """A seed whose samples are independent of the reference's: ``seed`` if the reference holds
-    none of it, else InputError; None picks the smallest such seed. A comparison that drew the
-    reference's own random numbers would share its noise (the reference's first N samples
-    *are* an N-spp MIS render), and subtracting the reference's variance would then favour it.
-    A reference that does not say which samples it holds cannot be checked: seed 0 is avoided
-    by default (tracer's default seed) and a note says so."""
-    return independent_seeds(reference, seed, 1, reference_path)[0]
-
-
-def independent_seeds(reference: Film, seed: int | None, count: int, reference_path: str | Path) -> list[int]:
-    """``count`` distinct seeds none of which the reference holds samples of (the rule of
-    :func:`independent_seed`): ``seed`` (refused if the reference holds it) and the next seeds
-    above it that it does not hold, or with None the smallest such seeds. The comparison's
-    renders use the first; a convergence sweep uses all of them, one progressive render each."""
-    held = {s for s, _, _ in reference.record.samples or ()}
-    if reference.record.samples is None:
-        print(f"tracer: note: {reference_path} does not say which samples it holds: the comparison's "
-              "renders cannot be checked to be independent of it", file=sys.stderr)
-        held = {0}
-    if seed is not None and seed in held:
-        raise InputError(f"--seed {seed}: the reference holds samples of seed {seed}, so the "
-                         "comparison would share its random numbers; use another seed or leave "
-                         "--seed out", str(reference_path))
-    seeds: list[int] = []
-    candidate = 0 if seed is None else seed
-    while len(seeds) < count:
-        if candidate > MAX_SEED:
-            raise InputError(f"--seed {seed}: no room for {count} seeds from it below 2^64",
-                             str(reference_path))
-        if candidate not in held:
-            seeds.append(candidate)
-        candidate += 1
-    return seeds
-
+from .reference import independent_seed, independent_seeds, scene_for_reference  # noqa: F401 (compare's API)
 
 # (light, bsdf) samples per camera sample for the MIS allocation sweep: ratios 1:0 ... 0:1.
 ALLOCATIONS = ((4, 0), (3, 1), (2, 2), (1, 3), (0, 4))
@@ -140,29 +63,51 @@ CONFIDENCE = 0.95
 EXTRAPOLATION_LIMIT = 4.0
 
 
+def product_of_options(names: list[str], *, heuristics: list[str], allocations: list[str],
+                       light_samplings: list[str | None], light_selections: list[str | None],
+                       ris_settings: list[tuple[int, str]], light_samples: int | None = None,
+                       bsdf_samples: int | None = None, one_sample: bool | None = None) -> tuple[list[Strategy], str]:
+    """Every strategy a comparison of the strategy ``names`` runs, with lists of options: mis with
+    every heuristic and allocation, ris with every ``(candidates, sources)`` of ``ris_settings``,
+    each strategy that takes light samples with every light sampling and selection (those that
+    take none once; None is the default), in that order. Returns them with the heuristic ris
+    weights its candidates with: the first classic one given (optimal weights may be negative).
+    Raises ``ValueError`` naming the option that cannot be."""
+    from ..strategy import CLASSIC_HEURISTICS
+
+    classic = [h for h in heuristics if h in CLASSIC_HEURISTICS]
+    if not classic and "ris" in names and any(sources == "light+bsdf" for _, sources in ris_settings):
+        raise ValueError("--heuristic: ris weights its light and BSDF candidates with balance, power or max "
+                         "(optimal weights may be negative); add one of them to the list")
+    ris_heuristic = (classic or ["power"])[0]
+
+    def make(name, ris=None, heuristic=None, allocation=None, sampling=None, selection=None) -> Strategy:
+        candidates, sources = ris or (None, None)
+        return Strategy.from_options(name, heuristic=heuristic, light_samples=light_samples,
+                                     bsdf_samples=bsdf_samples, one_sample=one_sample, light_selection=selection,
+                                     light_sampling=sampling, allocation=allocation, ris_candidates=candidates,
+                                     ris_sources=sources)
+
+    def weightings(name):
+        if name == "mis":
+            return [(h, a) for h in heuristics for a in allocations]
+        return [(ris_heuristic if name == "ris" else "power", "fixed")]
+
+    strategies = []
+    for name in names:
+        for ris in ris_settings if name == "ris" else [None]:
+            takes_lights = make(name, ris).light_count > 0
+            strategies += [make(name, ris, heuristic, allocation, sampling, selection)
+                           for heuristic, allocation in weightings(name)
+                           for sampling in (light_samplings if takes_lights else light_samplings[:1])
+                           for selection in (light_selections if takes_lights else light_selections[:1])]
+    return strategies, ris_heuristic
+
+
 def method_name(strategy: Strategy, sampler: str = DEFAULT_SAMPLER) -> str:
-    """A file-name-safe label of a strategy and sampler: ``mis``, ``mis_l3_b1``, ``light_x4``,
-    ``mis_optimal_adaptive``, ``light_solid-angle``, ``mis_bvh-lights``, ``ris_m16``,
-    ``mis_sobol`` ... (the defaults are left out)."""
-    count = strategy.light_count or strategy.direction_count
-    if strategy.name == "mis" and (strategy.light_samples, strategy.bsdf_samples) != (1, 1):
-        name = f"mis_l{strategy.light_samples}_b{strategy.bsdf_samples}"
-    elif strategy.name == "ris":
-        name = f"ris_l{strategy.light_samples}_b{strategy.bsdf_samples}" if strategy.bsdf_samples \
-            else f"ris_m{strategy.light_samples}"
-    else:
-        name = strategy.name if count == 1 else f"{strategy.name}_x{count}"
-    if strategy.name == "mis" and strategy.heuristic != "power":
-        name += f"_{strategy.heuristic}"
-    if strategy.adaptive:
-        name += "_adaptive"
-    if strategy.light_count and strategy.light_sampling != DEFAULT_LIGHT_SAMPLING:
-        name += f"_{strategy.light_sampling}"
-    if strategy.light_count and strategy.light_selection != "power":
-        name += f"_{strategy.light_selection}-lights"
-    if sampler != DEFAULT_SAMPLER:
-        name += f"_{sampler}"
-    return name
+    """A strategy's slug (``Strategy.slug``) with its sampler where that is not the default:
+    ``mis``, ``mis_l3_b1``, ``ris_m16``, ``mis_sobol`` ..."""
+    return strategy.slug if sampler == DEFAULT_SAMPLER else f"{strategy.slug}_{sampler}"
 
 
 @dataclass

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..atomic import save_figure, write_text
-from ..estimators import DirectLighting
+from ..estimator import DirectLighting
 from ..film import Film
 from ..render_loop import RenderSettings, render_complete
 from ..sampler_choice import DEFAULT_SAMPLER

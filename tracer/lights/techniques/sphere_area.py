@@ -1,4 +1,4 @@
-"""Sampling an analytic sphere light: by area, or by the cone of directions it subtends.
+"""Sampling an analytic sphere light by area (and the rows and helpers ``sphere_cone`` shares).
 
 A sphere emits ``EMISSION`` from its outside. Seen from a point x at distance d_c from the
 centre, it covers the cone of half-angle theta_max with sin(theta_max) = r / d_c.
@@ -22,8 +22,8 @@ centre, it covers the cone of half-angle theta_max with sin(theta_max) = r / d_c
   whole sphere of directions: area sampling is used there (every point is then seen from the
   back and gives 0, as the sphere emits outward only).
 
-Both return ``(wi, dist, le, pdf)`` as ``tracer.lights`` expects; the selection probability is
-multiplied in there. The pdfs of a direction that hits the sphere are pure functions of
+This module is the ``sphere_area`` technique (``--light-sampling area``); ``sphere_cone.py`` the
+cone. The selection probability is multiplied in by ``tracer.lights``. The pdfs of a direction that hits the sphere are pure functions of
 (x, wi, dist), so MIS weights of BSDF samples match.
 
 =========  =====  ================================
@@ -41,15 +41,23 @@ import math
 
 import numpy as np
 
-from ..frame import add_scaled, basis, dot, scale, sub
-from ..jit import jit
+from ...frame import add_scaled, dot, scale, sub
+from ...jit import jit
+from ...plugins import LightTechnique, register
 
-NAME = "sphere"
+NAME = "sphere_area"
 CENTER, RADIUS, EMISSION = 0, 3, 4
 WIDTH = 7
+PLUGIN = register(LightTechnique(NAME, code=2, module=__name__, rank=2, dims=2, emitters=("sphere",),
+                                 light_samplings=("area",), width=WIDTH, doc="a point uniform on the sphere"))
 
 
-def rows(spheres: np.ndarray, emission: np.ndarray) -> np.ndarray:
+def rows(emitters) -> np.ndarray:
+    """``(S, WIDTH)`` rows of S spheres (``emitters.SphereEmitters``)."""
+    return sphere_rows(emitters.spheres, emitters.emission)
+
+
+def sphere_rows(spheres: np.ndarray, emission: np.ndarray) -> np.ndarray:
     """``(S, WIDTH)`` rows of S spheres: ``spheres (S, 4)`` centre and radius, ``emission (S, 3)``."""
     out = np.zeros((len(spheres), WIDTH))
     out[:, CENTER:CENTER + 3] = spheres[:, :3]
@@ -110,49 +118,13 @@ def pdf_area(rows, k: int, x, wi, dist: float) -> float:
 
 
 @jit
-def _cone(rows, k: int, x):
-    """``(inside, sin2_max, one_minus_cos_max, axis, dist_center)`` of the cone sphere ``k``
-    subtends from ``x``; axis is the unit direction to the centre."""
-    center, radius = _center_radius(rows, k)
-    to_center = sub(center, x)
-    dc = math.sqrt(dot(to_center, to_center))
-    if not dc > radius:
-        return True, 1.0, 2.0, (0.0, 0.0, 1.0), dc
-    sin_max = radius / dc
-    sin2_max = sin_max * sin_max
-    one_minus_cos_max = sin2_max / (1.0 + math.sqrt(max(0.0, 1.0 - sin2_max)))
-    return False, sin2_max, one_minus_cos_max, scale(1.0 / dc, to_center), dc
+def sample(rows, k: int, x, n, u0: float, u1: float):
+    """The technique's sample (``tracer.lights.techniques``): :func:`sample_area`."""
+    wi, d, le, p = sample_area(rows, k, x, u0, u1)
+    return wi, d, le, p, False
 
 
 @jit
-def sample_cone(rows, k: int, x, u0: float, u1: float):
-    """A direction uniform in the cone sphere ``k`` subtends from ``x`` (area sampling from
-    inside): ``(wi, dist, le, pdf)``."""
-    inside, sin2_max, one_minus_cos_max, axis, _ = _cone(rows, k, x)
-    if inside:
-        return sample_area(rows, k, x, u0, u1)
-    one_minus_cos = one_minus_cos_max * u0  # cos theta uniform in [cos theta_max, 1]
-    cos = 1.0 - one_minus_cos
-    sin2 = min(one_minus_cos * (2.0 - one_minus_cos), sin2_max)
-    # alpha: the angle at the centre between the sampled point and the direction back to x.
-    sin_max = math.sqrt(sin2_max)
-    cos_alpha = sin2 / sin_max + cos * math.sqrt(max(0.0, 1.0 - sin2 / sin2_max))
-    sin_alpha = math.sqrt(max(0.0, 1.0 - cos_alpha * cos_alpha))
-    phi = 2.0 * math.pi * u1
-    s, t = basis(axis)
-    a, b = sin_alpha * math.cos(phi), sin_alpha * math.sin(phi)
-    normal = (a * s[0] + b * t[0] - cos_alpha * axis[0], a * s[1] + b * t[1] - cos_alpha * axis[1],
-              a * s[2] + b * t[2] - cos_alpha * axis[2])
-    wi, dist, le, pdf = _toward_point(rows, k, x, normal, False)
-    # Points at the very silhouette can round to the far side; the density is the cone's.
-    return wi, dist, le, (1.0 / (2.0 * math.pi * one_minus_cos_max) if pdf > 0.0 else 0.0)
-
-
-@jit
-def pdf_cone(rows, k: int, x, wi, dist: float) -> float:
-    """Solid-angle pdf of :func:`sample_cone` for the direction ``wi`` from ``x`` that hits the
-    sphere at distance ``dist``: constant over the cone (area sampling's from inside)."""
-    inside, _, one_minus_cos_max, _, _ = _cone(rows, k, x)
-    if inside:
-        return pdf_area(rows, k, x, wi, dist)
-    return 1.0 / (2.0 * math.pi * one_minus_cos_max)
+def pdf(rows, k: int, x, n, wi, dist: float) -> float:
+    """The technique's pdf: :func:`pdf_area`."""
+    return pdf_area(rows, k, x, wi, dist)

@@ -2,8 +2,8 @@
 receiver's cosine.
 
 The direction is uniform over the spherical triangle that the light projects onto the unit
-sphere around x (Arvo 1995, ``spherical_triangle.py``), p = 1 / Omega, which removes the d^2 and
-1 / cos theta_light variation of area sampling (``triangle_area.py``). The point is where the
+sphere around x (Arvo 1995, ``tracer.lights.spherical_triangle``), p = 1 / Omega, which removes the d^2 and
+1 / cos theta_light variation of area sampling (``triangle_area.py`` here). The point is where the
 direction meets the triangle's plane.
 
 With ``cos_warp`` the square (u0, u1) is first warped by the bilinear density whose corner
@@ -13,7 +13,7 @@ product of the two densities approximates p proportional to |cos theta_i|, the r
 factor of the integrand; for a diffuse receiver under an unoccluded light that is nearly
 zero-variance. pbrt-v4 (Pharr, Jakob and Humphreys, Physically Based Rendering 4th ed., sec.
 6.5.4, "Triangle sampling") uses the same warp; its pdf for a given direction needs the
-inverse of Arvo's map (``spherical_triangle.invert``).
+inverse of Arvo's map (``tracer.lights.spherical_triangle.invert``).
 
 As pbrt-v4 does, triangles that subtend less than ``MIN_SOLID_ANGLE`` sr are sampled by area
 instead; sample and pdf make the same choice from x, so the pair stays consistent. Below 3e-4
@@ -24,17 +24,27 @@ triangles over 6.22 sr (x close to a large triangle) keep spherical sampling: Ar
 construction loses only a few digits near a hemisphere (2.5e-13 at 2 pi - 0.02), while area
 sampling misses the close part of the light that carries the integral.
 
-The row is ``triangle_area``'s (vertices, normal, emission, 1 / area).
+The row is ``triangle_area``'s (vertices, normal, emission, 1 / area). This module is the
+``spherical_triangle`` technique (``--light-sampling solid-angle``); ``spherical_triangle_cos.py``
+the warped one (``solid-angle-cos``), which calls :func:`sample_warped` and :func:`pdf_warped`.
 """
 
 from __future__ import annotations
 
-from ..frame import dot, sub
-from ..jit import jit, jit_called
-from . import bilinear, spherical_triangle, triangle_area
-from .triangle_area import EMISSION, NORMAL, V0, V1, V2
+from ...frame import dot, sub
+from ...jit import jit, jit_called, opaque
+from ...plugins import LightTechnique, register
+from .. import bilinear
+from .. import spherical_triangle as arvo
+from . import triangle_area
+from .triangle_area import EMISSION, NORMAL, V0, V1, V2, WIDTH
 
+NAME = "spherical_triangle"
+PLUGIN = register(LightTechnique(NAME, code=4, module=__name__, rank=4, dims=2, emitters=("triangle",),
+                                 light_samplings=("solid-angle",), width=WIDTH,
+                                 doc="uniform in the spherical triangle (Arvo 1995)"))
 MIN_SOLID_ANGLE = 3e-4
+rows = triangle_area.rows
 
 
 @jit
@@ -54,20 +64,33 @@ def _corner_weights(n, x, a, b, c):
     return wb, wb, wa, wc
 
 
+@jit
+def sample(rows, k: int, x, n, u0: float, u1: float):
+    """The technique's sample (``tracer.lights.techniques``), without the warp."""
+    wi, d, le, p = sample_warped(rows, k, x, n, opaque(False), u0, u1)
+    return wi, d, le, p, False
+
+
+@jit
+def pdf(rows, k: int, x, n, wi, dist: float) -> float:
+    """The technique's pdf, without the warp."""
+    return pdf_warped(rows, k, x, n, opaque(False), wi, dist)
+
+
 @jit_called
-def sample(rows, k: int, x, n, cos_warp: bool, u0: float, u1: float):
+def sample_warped(rows, k: int, x, n, cos_warp: bool, u0: float, u1: float):
     """A direction toward triangle row ``k`` from ``x`` (normal ``n``): ``(wi, dist, le, pdf)``
     with pdf in solid angle; pdf 0 (and le 0) for the back side or a degenerate triangle."""
     a, b, c = _vertices(rows, k)
-    omega = spherical_triangle.solid_angle(x, a, b, c)
+    omega = arvo.solid_angle(x, a, b, c)
     if not omega > MIN_SOLID_ANGLE:
-        return triangle_area.sample(rows, k, x, u0, u1)
+        return triangle_area.sample_point(rows, k, x, u0, u1)
     warp_pdf = 1.0
     if cos_warp:
         w00, w10, w01, w11 = _corner_weights(n, x, a, b, c)
         u0, u1 = bilinear.sample(u0, u1, w00, w10, w01, w11)
         warp_pdf = bilinear.pdf(u0, u1, w00, w10, w01, w11)
-    wi, pdf = spherical_triangle.sample(x, a, b, c, u0, u1)
+    wi, pdf = arvo.sample(x, a, b, c, u0, u1)
     normal = (float(rows[k, NORMAL]), float(rows[k, NORMAL + 1]), float(rows[k, NORMAL + 2]))
     cos_light = -dot(normal, wi)
     if not (pdf > 0.0 and cos_light > 0.0):  # front side only
@@ -78,18 +101,18 @@ def sample(rows, k: int, x, n, cos_warp: bool, u0: float, u1: float):
 
 
 @jit_called
-def pdf(rows, k: int, x, n, cos_warp: bool, wi, dist: float) -> float:
-    """Solid-angle pdf with which :func:`sample` picks the direction ``wi`` from ``x`` (normal
+def pdf_warped(rows, k: int, x, n, cos_warp: bool, wi, dist: float) -> float:
+    """Solid-angle pdf with which :func:`sample_warped` picks the direction ``wi`` from ``x`` (normal
     ``n``) that hits triangle row ``k`` at distance ``dist``; 0 from the back side."""
     normal = (float(rows[k, NORMAL]), float(rows[k, NORMAL + 1]), float(rows[k, NORMAL + 2]))
     if not -dot(normal, wi) > 0.0:
         return 0.0
     a, b, c = _vertices(rows, k)
-    omega = spherical_triangle.solid_angle(x, a, b, c)
+    omega = arvo.solid_angle(x, a, b, c)
     if not omega > MIN_SOLID_ANGLE:
-        return triangle_area.pdf(rows, k, x, wi, dist)
+        return triangle_area.pdf_point(rows, k, x, wi, dist)
     if not cos_warp:
         return 1.0 / omega
-    u0, u1 = spherical_triangle.invert(x, a, b, c, wi)
+    u0, u1 = arvo.invert(x, a, b, c, wi)
     w00, w10, w01, w11 = _corner_weights(n, x, a, b, c)
     return bilinear.pdf(u0, u1, w00, w10, w01, w11) / omega

@@ -1,8 +1,10 @@
 """Sampling an emitting rectangle (a quad whose edges are perpendicular) by the solid angle it
-subtends, optionally warped toward the receiver's cosine.
+subtends, optionally warped toward the receiver's cosine: the ``spherical_rectangle`` technique
+(``--light-sampling solid-angle``); ``spherical_rectangle_cos.py`` is the warped one, which
+calls :func:`sample_warped` and :func:`pdf_warped`.
 
 The point is drawn by Ureña, Fajardo and King's area-preserving map of the square onto the
-spherical rectangle (2013, ``spherical_rectangle.py``): its direction from x is uniform in
+spherical rectangle (2013, ``tracer.lights.spherical_rectangle``): its direction from x is uniform in
 solid angle, p = 1 / Omega. With ``cos_warp`` the square is first warped by the bilinear
 density whose corner values are |n . w_c| (clamped below at 0.01) for the rectangle's corner
 directions w_c, placed at the corners of the square that the map sends to them; pbrt-v4
@@ -34,17 +36,27 @@ import math
 
 import numpy as np
 
-from ..frame import add_scaled, dot, scale, sub
-from ..jit import jit, jit_called
-from . import bilinear, spherical_rectangle
+from ...frame import add_scaled, dot, scale, sub
+from ...jit import jit, jit_called, opaque
+from ...plugins import LightTechnique, register
+from .. import bilinear
+from .. import spherical_rectangle as urena
 
-NAME = "rectangle"
+NAME = "spherical_rectangle"
 CORNER, EDGE_U, EDGE_V, NORMAL, EMISSION, INV_AREA = 0, 3, 6, 9, 12, 15
 WIDTH = 16
+PLUGIN = register(LightTechnique(NAME, code=6, module=__name__, rank=6, dims=2, emitters=("rectangle",),
+                                 light_samplings=("solid-angle",), width=WIDTH,
+                                 doc="uniform in the spherical rectangle (Urena et al. 2013)"))
 MIN_SOLID_ANGLE = 1e-4
 
 
-def rows(frames: np.ndarray, emission: np.ndarray) -> np.ndarray:
+def rows(emitters) -> np.ndarray:
+    """``(Q, WIDTH)`` rows of Q rectangles (``emitters.RectangleEmitters``)."""
+    return rectangle_rows(emitters.frames, emitters.emission)
+
+
+def rectangle_rows(frames: np.ndarray, emission: np.ndarray) -> np.ndarray:
     """``(Q, WIDTH)`` rows of Q rectangles: ``frames (Q, 3, 3)`` corner, edge u, edge v, and
     ``emission (Q, 3)``."""
     out = np.zeros((len(frames), WIDTH))
@@ -89,12 +101,25 @@ def _toward(rows, k: int, x, point, normal, pdf: float):
     return wi, d, le, pdf
 
 
+@jit
+def sample(rows, k: int, x, n, u0: float, u1: float):
+    """The technique's sample (``tracer.lights.techniques``), without the warp."""
+    wi, d, le, p = sample_warped(rows, k, x, n, opaque(False), u0, u1)
+    return wi, d, le, p, False
+
+
+@jit
+def pdf(rows, k: int, x, n, wi, dist: float) -> float:
+    """The technique's pdf, without the warp."""
+    return pdf_warped(rows, k, x, n, opaque(False), wi, dist)
+
+
 @jit_called
-def sample(rows, k: int, x, n, cos_warp: bool, u0: float, u1: float):
+def sample_warped(rows, k: int, x, n, cos_warp: bool, u0: float, u1: float):
     """A point on rectangle row ``k`` seen from ``x`` (normal ``n``): ``(wi, dist, le, pdf)``
     with pdf in solid angle; 0 for the back side."""
     corner, eu, ev, normal = _frame(rows, k)
-    omega = spherical_rectangle.solid_angle(x, corner, eu, ev)
+    omega = urena.solid_angle(x, corner, eu, ev)
     if not omega > MIN_SOLID_ANGLE:
         point = add_scaled(add_scaled(corner, u0, eu), u1, ev)
         wi, d, le, _ = _toward(rows, k, x, point, normal, 1.0)
@@ -105,23 +130,23 @@ def sample(rows, k: int, x, n, cos_warp: bool, u0: float, u1: float):
         w00, w10, w01, w11 = _corner_weights(n, x, corner, eu, ev)
         u0, u1 = bilinear.sample(u0, u1, w00, w10, w01, w11)
         warp_pdf = bilinear.pdf(u0, u1, w00, w10, w01, w11)
-    point, pdf = spherical_rectangle.sample_given(x, corner, eu, ev, omega, u0, u1, False)
+    point, pdf = urena.sample_given(x, corner, eu, ev, omega, u0, u1, False)
     return _toward(rows, k, x, point, normal, pdf * warp_pdf)
 
 
 @jit_called
-def pdf(rows, k: int, x, n, cos_warp: bool, wi, dist: float) -> float:
-    """Solid-angle pdf with which :func:`sample` picks the direction ``wi`` from ``x`` (normal
+def pdf_warped(rows, k: int, x, n, cos_warp: bool, wi, dist: float) -> float:
+    """Solid-angle pdf with which :func:`sample_warped` picks the direction ``wi`` from ``x`` (normal
     ``n``) that hits rectangle row ``k`` at distance ``dist``; 0 from the back side."""
     corner, eu, ev, normal = _frame(rows, k)
     cos_light = -dot(normal, wi)
     if not cos_light > 0.0:
         return 0.0
-    omega = spherical_rectangle.solid_angle(x, corner, eu, ev)
+    omega = urena.solid_angle(x, corner, eu, ev)
     if not omega > MIN_SOLID_ANGLE:
         return rows[k, INV_AREA] * dist * dist / cos_light
     if not cos_warp:
         return 1.0 / omega
-    u0, u1 = spherical_rectangle.invert(x, corner, eu, ev, add_scaled(x, dist, wi))
+    u0, u1 = urena.invert(x, corner, eu, ev, add_scaled(x, dist, wi))
     w00, w10, w01, w11 = _corner_weights(n, x, corner, eu, ev)
     return bilinear.pdf(u0, u1, w00, w10, w01, w11) / omega
