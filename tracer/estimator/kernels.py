@@ -63,6 +63,9 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
     counting = learning and tuned.collect
     n_shadow = 0
     n_direction = 0
+    # Read once here, not per light sample: a read through a tuple in the loop costs a
+    # reference-count update (``lights.sample_with``).
+    selection, technique, light_rows = light_tables.selection, light_tables.technique, light_tables.rows
     for lane in range(len(prim)):
         radiance[lane, 0] = radiance[lane, 1] = radiance[lane, 2] = 0.0
         if RESAMPLES:
@@ -101,7 +104,8 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
         if LIGHT_SAMPLES:
             for j in range(lights_here):
                 wi_world, dist, value, raw, w_balance, share_t = light_samples.light_sample(
-                    j, sampler, state, light_tables, params, plan, point, surface, (own_light, own_dir))
+                    j, sampler, state, selection, technique, light_rows, params, plan, point, surface,
+                    (own_light, own_dir))
                 # A sample that cannot contribute casts no ray. Learning looks at the unweighted
                 # value: whether a sample carries light must not depend on the heuristic (max's
                 # weight 0 would hide it from the allocation's statistics).

@@ -96,10 +96,19 @@ def sample(lights, x, n, n_receiver, u_select: float, u0: float, u1: float):
         selection probability alone. 0 where invalid.
     delta : a delta light (no other technique can produce this sample).
     """
-    k, pmf_k = dispatch.choose(lights.selection, x, n_receiver, u_select)
+    return sample_with(lights.selection, lights.technique, lights.rows, x, n, n_receiver, u_select, u0, u1)
+
+
+@template
+def sample_with(selection, technique, rows, x, n, n_receiver, u_select: float, u0: float, u1: float):
+    """:func:`sample` with the tables' parts read beforehand: a per-lane loop reads them once,
+    before it starts. Each read of an array through a tuple costs a reference-count update
+    (numba), and reading ``lights.selection``, ``.technique`` and ``.rows`` per light sample cost
+    ``shade`` 30% on ``veach_mis`` (1.13 s against 0.80 s for 512 x 512 x 16 lanes, one thread)."""
+    k, pmf_k = dispatch.choose(selection, x, n_receiver, u_select)
     if k < 0:
         return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, False
-    wi, dist, le, p, delta = dispatch.technique_sample(lights.technique[k], lights.rows, k, x, n, u0, u1)
+    wi, dist, le, p, delta = dispatch.technique_sample(technique[k], rows, k, x, n, u0, u1)
     return wi, dist, le, pmf_k * p, delta
 
 
