@@ -92,7 +92,8 @@ def every_feature_scene(folder: Path) -> Path:
             lo = param.lo if param.lo is not None else 0.0
             hi = param.hi if param.hi is not None and param.hi < 10 else lo + 1.0
             value = round(lo + 0.5 * (hi - lo), 3)
-            lines.append(f"{param.name} = " + (f"[{value}, {value}, {value}]" if param.size == 3 else f"{value}"))
+            lines.append(f"{param.name} = "
+                         + (f"[{value}, {value}, {value}]" if param.size == 3 else f"{value}"))
         blocks.append("\n".join(lines))
         spheres.append(f'[[shapes]]\ntype = "sphere"\ncenter = [{-4.5 + 1.1 * i:.2f}, 0.5, 0.0]\n'
                        f'radius = 0.5\nmaterial = "m{i}"')
@@ -110,7 +111,8 @@ def cases(every: Path) -> list[tuple[str, list[str]]]:
     for name, options in (("ris", ["--strategy", "ris"]), ("bvh", ["--light-selection", "bvh"]),
                           ("uniform selection", ["--light-selection", "uniform"]),
                           ("sobol", ["--sampler", "sobol"]), ("stratified", ["--sampler", "stratified"]),
-                          ("optimal", ["--heuristic", "optimal", "--light-samples", "2", "--bsdf-samples", "2"]),
+                          ("optimal", ["--heuristic", "optimal", "--light-samples", "2",
+                                       "--bsdf-samples", "2"]),
                           ("adaptive", ["--allocation", "adaptive"]), ("one-sample", ["--one-sample"]),
                           ("light", ["--strategy", "light"]), ("bsdf", ["--strategy", "bsdf"])):
         out.append((name, [*small, *options]))
@@ -121,7 +123,8 @@ def run(arguments: list[str], cache: Path, out: Path) -> float:
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # a user's Python keeps its bytecode
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "tracer", "render", *arguments, "--out", str(out), "--quiet"],
+    done = subprocess.run([sys.executable, "-m", "tracer", "render", *arguments, "--out", str(out),
+                           "--quiet"],
                           cwd=ROOT, env=env, capture_output=True, text=True)
     seconds = time.perf_counter() - start
     if done.returncode != 0:

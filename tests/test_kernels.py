@@ -25,8 +25,8 @@ from tracer.materials import Materials
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _features(materials_used=("diffuse",), techniques=("triangle_area",), selection="power", sampler="independent",
-              direction="bsdf", combiner="mis", learns=False) -> FeatureSet:
+def _features(materials_used=("diffuse",), techniques=("triangle_area",), selection="power",
+              sampler="independent", direction="bsdf", combiner="mis", learns=False) -> FeatureSet:
     return FeatureSet(tuple(materials_used), tuple(techniques), selection, sampler, direction, combiner,
                       True, direction is not None, learns)
 
@@ -117,7 +117,8 @@ def test_two_feature_sets_share_nothing_stale_in_the_disk_cache(tmp_path):
     in a new process loads both (two hits), and each build gives its own answer for a plastic
     lane (0 in A, which has no plastic branch; plastic's value in B): a B that loaded A's entry
     would say 0."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT), TRACER_KERNELS="scene")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT),
+               TRACER_KERNELS="scene")
 
     def run(order):
         done = subprocess.run([sys.executable, "-c", PROBE, order], capture_output=True, text=True, env=env,
@@ -153,7 +154,8 @@ def test_a_scene_without_a_feature_does_not_compile_it(tmp_path):
                      '[materials.wall]\ntype = "diffuse"\nreflectance = [0.5, 0.5, 0.5]\n'
                      '[[shapes]]\ntype = "quad"\norigin = [-1, -1, 0]\nedge1 = [2, 0, 0]\nedge2 = [0, 2, 0]\n'
                      'material = "wall"\n'
-                     '[[shapes]]\ntype = "quad"\norigin = [-0.2, -0.2, 1]\nedge1 = [0, 0.4, 0]\nedge2 = [0.4, 0, 0]\n'
+                     '[[shapes]]\ntype = "quad"\norigin = [-0.2, -0.2, 1]\n'
+                     'edge1 = [0, 0.4, 0]\nedge2 = [0.4, 0, 0]\n'
                      'emission = [4, 4, 4]\n')
     probe = textwrap.dedent(f"""
         import importlib, json
@@ -185,7 +187,8 @@ def test_a_scene_without_a_feature_does_not_compile_it(tmp_path):
         LightSampler(tri, "power", "solid-angle").sample(np.array([0.5]), np.array([[0.3, 0.6]]), x, n)
         print(json.dumps([after_render, compiled()]))
     """)
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT), TRACER_KERNELS="scene")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT),
+               TRACER_KERNELS="scene")
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, timeout=900)
     assert done.returncode == 0, done.stderr
     after_render, after_use = json.loads(done.stdout.strip().splitlines()[-1])
@@ -211,13 +214,16 @@ def test_two_processes_that_need_one_build_compile_it_once(tmp_path):
 
     scene = tmp_path / "walls.toml"
     scene.write_text(WALLS)
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT), TRACER_KERNELS="scene")
-    runs = [subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "--spp", "4", "--threads", "1",
-                              "-o", str(tmp_path / f"r{i}.exr")], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT),
+               TRACER_KERNELS="scene")
+    runs = [subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "--spp", "4",
+                              "--threads", "1", "-o", str(tmp_path / f"r{i}.exr")],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                              text=True, env=env) for i in range(2)]
     errors = [run.communicate(timeout=900)[1] for run in runs]
     assert [run.returncode for run in runs] == [0, 0], errors
-    compiled_alone = [any("compiling the kernels" in line and "waiting" not in line for line in err.splitlines())
+    compiled_alone = [any("compiling the kernels" in line and "waiting" not in line
+                          for line in err.splitlines())
                       for err in errors]
     assert sum(compiled_alone) <= 1, errors
     images = [read_exr(tmp_path / f"r{i}.exr") for i in range(2)]
@@ -242,7 +248,8 @@ def test_a_scenes_own_build_renders_the_bits_of_the_shared_build(scene_name, str
     films = {}
     for mode in ("scene", "shared"):
         monkeypatch.setenv("TRACER_KERNELS", mode)
-        result = render(scene, Strategy(**strategy), RenderSettings(spp=4, seed=5, threads=1, sampler=sampler))
+        result = render(scene, Strategy(**strategy),
+                        RenderSettings(spp=4, seed=5, threads=1, sampler=sampler))
         films[mode] = result.film
     np.testing.assert_array_equal(films["scene"].mean, films["shared"].mean)
     np.testing.assert_array_equal(films["scene"].variance(), films["shared"].variance())
@@ -317,7 +324,8 @@ def test_every_light_technique_is_reached_by_its_own_branch(technique, write_sce
     module = plugin.functions()
     # The technique's own chain and one after a branch of every other technique's code, so that
     # a branch that another code reached would show (a chain of all of them compiles for a minute).
-    others = tuple(t for t in plugins.names("light_technique") if t in ("point", "triangle_area") and t != technique)
+    others = tuple(t for t in plugins.names("light_technique")
+                   if t in ("point", "triangle_area") and t != technique)
     dispatch = build(_features(techniques=(*others, technique))).dispatch
     rng = np.random.default_rng(11)
     served = [s for s in plugin.light_samplings if s != "*"] or ["area"]

@@ -23,7 +23,8 @@ from test_estimators import ANALYTIC_SCENE, POINTS, expected_radiance, shoot_at
 from stats import sidak, t_test_mean
 
 TESTS = Path(__file__).resolve().parent
-PLUGINS = ("plugins.lambert_uniform", "plugins.triangle_area_sqrt", "plugins.index_selection", "plugins.pcg_sampler")
+PLUGINS = ("plugins.lambert_uniform", "plugins.triangle_area_sqrt", "plugins.index_selection",
+           "plugins.pcg_sampler")
 
 # Each strategy uses all four plug-ins at once, so that each plug-in's sample and pdf are used:
 # light samples alone (the technique, the selection), direction samples alone (the material's

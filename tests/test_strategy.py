@@ -76,7 +76,8 @@ def test_options_left_out_are_the_defaults_and_ris_takes_its_candidates():
 def test_old_records_read_with_the_defaults():
     """A file of an older tracer leaves out the fields that came later (light sampling,
     selection, allocation): they read as the defaults those versions used."""
-    old = Strategy.from_record({"strategy": "mis", "heuristic": "balance", "light_samples": 1, "bsdf_samples": 1})
+    old = Strategy.from_record({"strategy": "mis", "heuristic": "balance", "light_samples": 1,
+                                "bsdf_samples": 1})
     assert old == Strategy("mis", "balance")
     assert [Strategy(s).slug for s in ("mis", "light", "bsdf")] == ["mis", "light", "bsdf"]
     assert Strategy("mis", "balance", 2, 1, one_sample=True).slug == "mis_l2_b1_one-sample_balance"

@@ -147,7 +147,8 @@ def register(plugin: Plugin) -> Plugin:
     if plugin.kind not in KINDS:
         raise ValueError(f"unknown plug-in kind {plugin.kind!r}; expected one of {', '.join(KINDS)}")
     if plugin.kind == "material" and plugin.code <= 0:
-        raise ValueError(f"material {plugin.name!r} has code {plugin.code}; codes are > 0 (0 is the black material)")
+        raise ValueError(f"material {plugin.name!r} has code {plugin.code}; "
+                         "codes are > 0 (0 is the black material)")
     if isinstance(plugin, LightTechnique):
         # The kernels give a technique two random numbers and a row of one 64-byte cache line
         # (``tracer.lights``); a technique that needs more needs the dimension map widened.

@@ -115,7 +115,8 @@ class RenderRecord:
         that drew samples ``first_sample .. first_sample + spp - 1`` with ``seed``."""
         from . import __version__
 
-        return cls(**strategy.to_record(), sampler=sampler, samples=((int(seed), int(first_sample), int(first_sample + spp)),),
+        return cls(**strategy.to_record(), sampler=sampler,
+                   samples=((int(seed), int(first_sample), int(first_sample + spp)),),
                    seconds=float(seconds), scene=str(scene.path), scene_digest=scene.digest,
                    version=__version__)
 

@@ -205,8 +205,9 @@ class Strategy:
         return "_".join(parts)
 
     @classmethod
-    def from_options(cls, name: str = "mis", *, heuristic: str | None = None, light_samples: int | None = None,
-                     bsdf_samples: int | None = None, one_sample: bool | None = None,
+    def from_options(cls, name: str = "mis", *, heuristic: str | None = None,
+                     light_samples: int | None = None, bsdf_samples: int | None = None,
+                     one_sample: bool | None = None,
                      light_selection: str | None = None, light_sampling: str | None = None,
                      allocation: str | None = None, ris_candidates: int | None = None,
                      ris_sources: str | None = None) -> "Strategy":
@@ -227,8 +228,9 @@ class Strategy:
     def to_record(self) -> dict[str, object]:
         """The record's estimator fields (``tracer.record.ESTIMATOR_FIELDS`` but the sampler): the
         counts this strategy takes, and ``none`` for a heuristic or light sampling it does not use."""
-        return {"strategy": self.name, "heuristic": self.recorded_heuristic, "light_samples": int(self.light_count),
-                "bsdf_samples": int(self.direction_count), "one_sample": bool(self.one_sample),
+        return {"strategy": self.name, "heuristic": self.recorded_heuristic,
+                "light_samples": int(self.light_count), "bsdf_samples": int(self.direction_count),
+                "one_sample": bool(self.one_sample),
                 "light_selection": self.light_selection, "light_sampling": self.recorded_light_sampling,
                 "allocation": self.allocation}
 

@@ -260,8 +260,9 @@ class PassHook:
     @classmethod
     def of(cls, plan, width: int, height: int, replicates: int, **options) -> "PassHook":
         """A hook with a fresh ``Learner`` for the estimator plan ``plan`` (``estimator.Plan``)."""
-        learner = Learner(width * height, width, replicates, plan.c_light if plan.one_sample else plan.n_light,
-                          plan.total, plan.optimal, plan.adaptive)
+        learner = Learner(width * height, width, replicates,
+                          plan.c_light if plan.one_sample else plan.n_light, plan.total, plan.optimal,
+                          plan.adaptive)
         return cls(learner, **options)
 
     def first(self) -> Tuning:

@@ -17,7 +17,8 @@ PLUGIN = register(LightTechnique(NAME, code=101, module=__name__, dims=2, emitte
                                  doc="uniform by area, square-root barycentrics"))
 rows = triangle_area.rows  # the same columns: vertices, normal, emission, 1 / area
 V0, V1, V2, NORMAL, EMISSION, INV_AREA = (triangle_area.V0, triangle_area.V1, triangle_area.V2,
-                                          triangle_area.NORMAL, triangle_area.EMISSION, triangle_area.INV_AREA)
+                                          triangle_area.NORMAL, triangle_area.EMISSION,
+                                          triangle_area.INV_AREA)
 
 
 @jit
@@ -25,8 +26,10 @@ def sample(rows, k: int, x, n, u0: float, u1: float):
     s = math.sqrt(u0)
     b1, b2 = s * (1.0 - u1), s * u1  # the point v0 + b1 (v1 - v0) + b2 (v2 - v0)
     lx = rows[k, V0] + b1 * (rows[k, V1] - rows[k, V0]) + b2 * (rows[k, V2] - rows[k, V0]) - x[0]
-    ly = rows[k, V0 + 1] + b1 * (rows[k, V1 + 1] - rows[k, V0 + 1]) + b2 * (rows[k, V2 + 1] - rows[k, V0 + 1]) - x[1]
-    lz = rows[k, V0 + 2] + b1 * (rows[k, V1 + 2] - rows[k, V0 + 2]) + b2 * (rows[k, V2 + 2] - rows[k, V0 + 2]) - x[2]
+    ly = (rows[k, V0 + 1] + b1 * (rows[k, V1 + 1] - rows[k, V0 + 1])
+          + b2 * (rows[k, V2 + 1] - rows[k, V0 + 1]) - x[1])
+    lz = (rows[k, V0 + 2] + b1 * (rows[k, V1 + 2] - rows[k, V0 + 2])
+          + b2 * (rows[k, V2 + 2] - rows[k, V0 + 2]) - x[2])
     d2 = lx * lx + ly * ly + lz * lz
     d = math.sqrt(d2)
     if d <= 0.0:

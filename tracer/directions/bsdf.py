@@ -9,7 +9,8 @@ from ..kernels import UNBOUND, template
 from ..plugins import DirectionTechnique, register
 
 NAME = "bsdf"
-PLUGIN = register(DirectionTechnique(NAME, module=__name__, rank=2, dims=3, doc="the material's own sampling"))
+PLUGIN = register(DirectionTechnique(NAME, module=__name__, rank=2, dims=3,
+                                     doc="the material's own sampling"))
 
 
 @template

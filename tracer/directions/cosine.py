@@ -9,7 +9,8 @@ from ..plugins import DirectionTechnique, register
 from .uniform import hemisphere_sample
 
 NAME = "cosine"
-PLUGIN = register(DirectionTechnique(NAME, module=__name__, rank=1, dims=2, doc="cosine-weighted over the hemisphere"))
+PLUGIN = register(DirectionTechnique(NAME, module=__name__, rank=1, dims=2,
+                                     doc="cosine-weighted over the hemisphere"))
 
 
 @template

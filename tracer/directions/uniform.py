@@ -8,7 +8,8 @@ from ..kernels import UNBOUND, template
 from ..plugins import DirectionTechnique, register
 
 NAME = "uniform"
-PLUGIN = register(DirectionTechnique(NAME, module=__name__, rank=0, dims=2, doc="uniform over the hemisphere"))
+PLUGIN = register(DirectionTechnique(NAME, module=__name__, rank=0, dims=2,
+                                     doc="uniform over the hemisphere"))
 
 
 @template

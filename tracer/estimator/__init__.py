@@ -85,9 +85,9 @@ class DirectLighting:
         n_light, n_dir = strategy.light_count, strategy.direction_count
         one_sample = strategy.one_sample_mis
         total = 1.0 if one_sample else float(n_light + n_dir)
-        self.plan = Plan(n_light, n_dir, mis.code(strategy.heuristic), one_sample, n_light / (n_light + n_dir),
-                         strategy.learns_control_variate, strategy.adaptive, total,
-                         n_light + n_dir if strategy.adaptive else n_light)
+        self.plan = Plan(n_light, n_dir, mis.code(strategy.heuristic), one_sample,
+                         n_light / (n_light + n_dir), strategy.learns_control_variate, strategy.adaptive,
+                         total, n_light + n_dir if strategy.adaptive else n_light)
 
     @property
     def learns(self) -> bool:
@@ -100,8 +100,8 @@ class DirectLighting:
         materials = tuple(by_code[k].name for k in sorted(set(self.surfaces.material_kind.tolist()))
                           if k in by_code)
         strategy = self.strategy
-        features = FeatureSet(materials, technique_names(self.lights.tables), strategy.light_selection, sampler,
-                              strategy.direction_technique if strategy.direction_count else None,
+        features = FeatureSet(materials, technique_names(self.lights.tables), strategy.light_selection,
+                              sampler, strategy.direction_technique if strategy.direction_count else None,
                               self.combiner.name, bool(strategy.light_count), bool(strategy.direction_count),
                               strategy.learns)
         return features.widened() if shared_builds() else features
@@ -160,21 +160,22 @@ class DirectLighting:
         tables = self.lights.tables
         prim = self.rays.first_hit(origins, dirs)
         n_shadow, n_direction = made.function(estimator_kernels.shade)(
-            CameraHits(prim, origins, dirs, pixel, sample), sampler, self.surfaces, tables, self.plan, tuned, out)
+            CameraHits(prim, origins, dirs, pixel, sample), sampler, self.surfaces, tables, self.plan, tuned,
+            out)
         d = slice(0, n_direction)
         if self.combiner.resamples:
             # The BSDF candidates meet their emitters; one shadow ray per lane for the kept one.
             found = self.emitter_rays.first_hit(direction.origin[d], direction.dir[d]) if n_direction \
                 else np.zeros(0, dtype=np.int32)
-            n_shadow = made.function(ris.resample)(radiance, self.surfaces, tables, self.plan, direction, found,
-                                                   shadow, reservoirs)
+            n_shadow = made.function(ris.resample)(radiance, self.surfaces, tables, self.plan, direction,
+                                                   found, shadow, reservoirs)
             d, found = slice(0, 0), found[:0]
         s = slice(0, n_shadow)
         blocked = self.rays.occluded(shadow.origin[s], shadow.dir[s], shadow.tmax[s])
         if not self.combiner.resamples:
             found = self.rays.first_hit(direction.origin[d], direction.dir[d])
-        made.function(estimator_kernels.gather)(radiance, self.surfaces, tables, self.plan, tuned, shadow, blocked,
-                                                direction, found, lane_stats)
+        made.function(estimator_kernels.gather)(radiance, self.surfaces, tables, self.plan, tuned, shadow,
+                                                blocked, direction, found, lane_stats)
         return radiance, lane_stats
 
     def compile(self, sampler: samplers.SamplerParams, progress: bool = False) -> float:
@@ -197,7 +198,8 @@ class DirectLighting:
                        direction, found, lane_stats), template=estimator_kernels.gather),
                  Call((sampler, lanes, lanes, *self.scene.camera.screen), template=lane_directions)]
         if self.combiner.resamples:
-            calls.append(Call((radiance, self.surfaces, tables, self.plan, direction, found, shadow, reservoirs),
+            calls.append(Call((radiance, self.surfaces, tables, self.plan, direction, found, shadow,
+                               reservoirs),
                               template=ris.resample))
         features = self.features(samplers.name_of(sampler))
         return compile_all(features, calls, features.describe(), progress)

@@ -34,7 +34,8 @@ def direction_sample(j: int, sampler, state, params, plan, point, surface, own_d
     kind, material = surface
     u = dispatch.uniform_pair(sampler, state, dimensions.direction(plan.light_slots, j))
     wi, weight, pdf_dir, delta = dispatch.direction_sample(
-        kind, params, material, wo, dispatch.uniform(sampler, state, dimensions.lobe_choice(plan.light_slots, j)),
+        kind, params, material, wo,
+        dispatch.uniform(sampler, state, dimensions.lobe_choice(plan.light_slots, j)),
         u[0], u[1])
     value = (weight[0] / own_dir, weight[1] / own_dir, weight[2] / own_dir)
     return to_world(s, t, normal, wi), value, pdf_dir, delta

@@ -54,7 +54,8 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
     shadow_origin, shadow_dir, shadow_tmax = shadow.origin, shadow.dir, shadow.tmax
     shadow_value, shadow_lane = shadow.value, shadow.lane
     shadow_other, shadow_control, shadow_v2, shadow_t = shadow.other, shadow.control, shadow.v2, shadow.t
-    dir_origin, dir_dir, dir_value, dir_lane = direction.origin, direction.dir, direction.value, direction.lane
+    dir_origin, dir_dir, dir_value, dir_lane = (direction.origin, direction.dir, direction.value,
+                                                direction.lane)
     dir_point, dir_normal, dir_shading = direction.point, direction.normal, direction.shading
     dir_pdf, dir_delta, dir_other = direction.pdf, direction.delta, direction.other
     # Lane statistics exist only where a pass gathers them (optimal MIS in every pass, adaptive
@@ -117,8 +118,8 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
                 origin = offset_origin(x, eps, geometric, wi_world)
                 to_target, length = normalized(sub(add_scaled(x, dist, wi_world), origin))
                 if RESAMPLES:
-                    ris.offer(shadow_origin, shadow_dir, shadow_tmax, shadow_value, weight_sum, u_left, radiance,
-                              lane, origin, to_target, max(length - eps, 0.0), value)
+                    ris.offer(shadow_origin, shadow_dir, shadow_tmax, shadow_value, weight_sum, u_left,
+                              radiance, lane, origin, to_target, max(length - eps, 0.0), value)
                     continue
                 shadow_tmax[n_shadow] = max(length - eps, 0.0)
                 if learning:
@@ -129,15 +130,15 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
                     shadow_t[n_shadow] = share_t
                     if counting:
                         lane_stats[lane, tuning.LIGHT_RAYS] += 1.0
-                n_shadow = _put(shadow_origin, shadow_dir, shadow_value, shadow_lane, n_shadow, origin, to_target,
-                                value, lane)
+                n_shadow = _put(shadow_origin, shadow_dir, shadow_value, shadow_lane, n_shadow, origin,
+                                to_target, value, lane)
 
         # Direction sampling: f |cos| / (n̄_d p_d); ``gather`` multiplies in the emitter the ray
         # hits and the MIS weight.
         if DIRECTION_SAMPLES:
             for j in range(dirs_here):
-                wi_world, value, pdf_dir, delta = direction_sample(j, sampler, state, params, plan, point, surface,
-                                                                   own_dir)
+                wi_world, value, pdf_dir, delta = direction_sample(j, sampler, state, params, plan, point,
+                                                                   surface, own_dir)
                 if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
                     _flag_nan(radiance, lane, value)
                     continue
@@ -153,8 +154,8 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
                     dir_point[n_direction, axis] = x[axis]
                     dir_normal[n_direction, axis] = geometric[axis]
                     dir_shading[n_direction, axis] = normal[axis]
-                n_direction = _put(dir_origin, dir_dir, dir_value, dir_lane, n_direction, origin, wi_world, value,
-                                   lane)
+                n_direction = _put(dir_origin, dir_dir, dir_value, dir_lane, n_direction, origin, wi_world,
+                                   value, lane)
     return n_shadow, n_direction
 
 
@@ -176,16 +177,16 @@ def gather(radiance, surfaces, light_tables, plan, tuned, shadow, blocked, direc
             for c in range(3):
                 radiance[lane, c] += shadow_value[row, c]
             if learning:
-                tuning.learn(lane_stats, lane, shares, collect, shadow_control[row], shadow_v2[row], shadow_t[row],
-                             shadow_other[row] / plan.total)
+                tuning.learn(lane_stats, lane, shares, collect, shadow_control[row], shadow_v2[row],
+                             shadow_t[row], shadow_other[row] / plan.total)
     hit_table, first_sphere = surfaces.hit_table, surfaces.first_sphere
     rays = direction_arrays(direction)
     lanes, others, pdfs, deltas = direction.lane, direction.other, direction.pdf, direction.delta
     for row in range(len(prim)):
         if prim[row] < 0:
             continue
-        hit, _, value, raw, pdf_light = direction_value(hit_table, first_sphere, light_tables, plan.heuristic, rays,
-                                                        row, prim[row])
+        hit, _, value, raw, pdf_light = direction_value(hit_table, first_sphere, light_tables, plan.heuristic,
+                                                        rays, row, prim[row])
         if not hit:
             continue
         lane = lanes[row]

@@ -40,7 +40,8 @@ def light_sample(j: int, sampler, state, selection, technique, rows, params, pla
     zero = (0.0, 0.0, 0.0)
     u = dispatch.uniform_pair(sampler, state, dimensions.light_point(j))
     wi_world, dist, le, pdf_light, delta = lights.sample_with(
-        selection, technique, rows, x, geometric, normal, dispatch.uniform(sampler, state, dimensions.light_choice(j)),
+        selection, technique, rows, x, geometric, normal,
+        dispatch.uniform(sampler, state, dimensions.light_choice(j)),
         u[0], u[1])
     if not pdf_light > 0.0:
         return wi_world, 0.0, zero, zero, 1.0, 1.0

@@ -152,8 +152,10 @@ def build_tables(scene, light_selection: str = "power",
     selection = plugins.get("light_selection", light_selection)
     chosen = techniques_for(light_sampling)
     tri = emitters.emitting_triangles(scene)
-    rectangles = emitters.rectangles(scene, tri) if "rectangle" in chosen else emitters.rectangles(scene, tri[:0])
-    in_rectangle = np.isin(tri, np.concatenate(rectangles.prims)) if len(rectangles) else np.zeros(len(tri), bool)
+    rectangles = (emitters.rectangles(scene, tri) if "rectangle" in chosen
+                  else emitters.rectangles(scene, tri[:0]))
+    in_rectangle = (np.isin(tri, np.concatenate(rectangles.prims)) if len(rectangles)
+                    else np.zeros(len(tri), bool))
     records = {"triangle": emitters.triangles(scene, tri[~in_rectangle]), "rectangle": rectangles,
                "sphere": emitters.spheres(scene), "point": emitters.points(scene)}
     ordered = [records[kind] for kind in emitters.KINDS]
@@ -167,7 +169,8 @@ def build_tables(scene, light_selection: str = "power",
             continue
         plugin = chosen.get(kind)
         if plugin is None:
-            raise ValueError(f"light sampling {light_sampling!r} has no technique for the scene's {kind} emitters "
+            raise ValueError(f"light sampling {light_sampling!r} has no technique for the scene's "
+                             f"{kind} emitters "
                              f"(it serves {', '.join(sorted(chosen)) or 'none'})")
         block = plugin.functions().rows(record)
         rows[first:first + len(record), :block.shape[1]] = block

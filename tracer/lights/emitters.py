@@ -135,10 +135,11 @@ def rectangles(scene, tri: np.ndarray) -> RectangleEmitters:
 def triangles(scene, tri: np.ndarray) -> TriangleEmitters:
     corners = scene.vertices[scene.faces[tri]]
     emission = scene.emission[tri]
-    return TriangleEmitters(np.pi * scene.area[tri] * emission.mean(axis=1), scene.shape_of_triangle[tri].astype(np.int64),
-                            scene.area[tri], corners.min(axis=1), corners.max(axis=1), scene.normal[tri],
-                            np.ones(len(tri)), [tri.astype(np.int64)], corners=corners,
-                            normal=scene.normal[tri], emission=emission)
+    return TriangleEmitters(np.pi * scene.area[tri] * emission.mean(axis=1),
+                            scene.shape_of_triangle[tri].astype(np.int64), scene.area[tri],
+                            corners.min(axis=1), corners.max(axis=1), scene.normal[tri], np.ones(len(tri)),
+                            [tri.astype(np.int64)], corners=corners, normal=scene.normal[tri],
+                            emission=emission)
 
 
 def spheres(scene) -> SphereEmitters:

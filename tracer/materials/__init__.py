@@ -156,7 +156,8 @@ class Materials:
         """``template`` built for the material types of this table (``tracer.kernels``)."""
         from ..kernels import FeatureSet, build
 
-        names = tuple(BY_CODE[int(k)].name for k in sorted(set(self.table.kind.tolist())) if int(k) in BY_CODE)
+        names = tuple(BY_CODE[int(k)].name for k in sorted(set(self.table.kind.tolist()))
+                      if int(k) in BY_CODE)
         features = FeatureSet(names, (), "power", "independent", None, "sum", False, False, False)
         return build(features).function(template)
 
@@ -178,7 +179,8 @@ class Materials:
             if np.any(lobe_bits > 1):
                 raise ValueError("materials with several lobes need u (n, 3): a lobe choice and a direction")
             u = np.concatenate([np.zeros((len(u), 1)), u], axis=1)
-        return MaterialSample(*self._kernel(_sample_lanes)(self.table.kind, self.table.params, self.row, wo, u))
+        return MaterialSample(*self._kernel(_sample_lanes)(self.table.kind, self.table.params, self.row,
+                                                           wo, u))
 
 
 @kernel
@@ -198,8 +200,9 @@ def _sample_lanes(kind, params, row, wo, u):
     wi, weight, p = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
     flags = np.empty(n, dtype=np.int64)
     for i in range(n):
-        w, value, p[i], flags[i] = dispatch.material_sample(kind[row[i]], params, row[i], (wo[i, 0], wo[i, 1], wo[i, 2]),
-                                          u[i, 0], u[i, 1], u[i, 2])
+        w, value, p[i], flags[i] = dispatch.material_sample(kind[row[i]], params, row[i],
+                                                            (wo[i, 0], wo[i, 1], wo[i, 2]),
+                                                            u[i, 0], u[i, 1], u[i, 2])
         wi[i, 0], wi[i, 1], wi[i, 2] = w
         weight[i, 0], weight[i, 1], weight[i, 2] = value
     return wi, weight, p, flags

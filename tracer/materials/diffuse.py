@@ -15,7 +15,8 @@ from ..plugins import register
 from .base import DIFFUSE, MaterialType, Param, rgb
 
 CODE = 1  # the dispatch code (``tracer.materials``)
-TYPE = register(MaterialType(module=__name__, rank=CODE, name="diffuse", code=CODE, lobes=DIFFUSE, doc="Lambertian: f = reflectance / pi",
+TYPE = register(MaterialType(module=__name__, rank=CODE, name="diffuse", code=CODE, lobes=DIFFUSE,
+                    doc="Lambertian: f = reflectance / pi",
                     params=(Param("reflectance", 3, lo=0.0, hi=1.0, doc="albedo per channel"),)))
 REFLECTANCE = TYPE.column("reflectance")
 

@@ -69,7 +69,8 @@ def _derive(values: dict[str, object]) -> dict[str, object]:
     return out
 
 
-TYPE = register(MaterialType(module=__name__, rank=CODE, name="plastic", code=CODE, lobes=DELTA | DIFFUSE, doc="diffuse base under a smooth coating",
+TYPE = register(MaterialType(module=__name__, rank=CODE, name="plastic", code=CODE, lobes=DELTA | DIFFUSE,
+                    doc="diffuse base under a smooth coating",
                     params=COATING_PARAMS, derived=COATING_DERIVED, derive=_derive))
 DIFFUSE_REFLECTANCE = TYPE.column("diffuse_reflectance")
 SPECULAR_REFLECTANCE = TYPE.column("specular_reflectance")

@@ -80,7 +80,8 @@ def make(name: str, seed: int, first_sample: int = 0, spp: int = 1) -> SamplerPa
     plugin = plugins.get("sampler", name)
     replicates = plugin.replicates
     nx, ny = stratified.grid(-(-spp // replicates)) if name == stratified.NAME else (1, 1)
-    return SamplerParams(plugins.names("sampler").index(name), seed_key(seed), replicates, int(first_sample), nx, ny)
+    return SamplerParams(plugins.names("sampler").index(name), seed_key(seed), replicates, int(first_sample),
+                         nx, ny)
 
 
 def name_of(sampler: SamplerParams) -> str:

@@ -18,7 +18,8 @@ from ..jit import jit
 from ..plugins import Sampler, register
 
 NAME = "independent"
-PLUGIN = register(Sampler(NAME, module=__name__, rank=0, replicates=0, doc="independent uniforms (SplitMix64)"))
+PLUGIN = register(Sampler(NAME, module=__name__, rank=0, replicates=0,
+                          doc="independent uniforms (SplitMix64)"))
 GOLDEN_GAMMA = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)

@@ -41,7 +41,9 @@ from .independent import GOLDEN_GAMMA, mix64
 from .replicates import replicate_start
 
 NAME = "sobol"
-PLUGIN = register(Sampler(NAME, module=__name__, rank=2, replicates=REPLICATES, max_samples=REPLICATES * SOBOL_MAX_INDEX, doc="Owen-scrambled Sobol points per pair of dimensions, 8 replicates"))
+PLUGIN = register(Sampler(NAME, module=__name__, rank=2, replicates=REPLICATES,
+                          max_samples=REPLICATES * SOBOL_MAX_INDEX,
+                          doc="Owen-scrambled Sobol points per pair of dimensions, 8 replicates"))
 _M32 = np.uint64(0xFFFFFFFF)
 _BYTE = np.uint64(0xFF)
 _S8, _S16, _S24 = np.uint64(8), np.uint64(16), np.uint64(24)

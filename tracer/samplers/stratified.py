@@ -34,7 +34,8 @@ from .independent import GOLDEN_GAMMA, mix64
 from .replicates import replicate_start
 
 NAME = "stratified"
-PLUGIN = register(Sampler(NAME, module=__name__, rank=1, replicates=REPLICATES, doc="jittered strata per pair of dimensions, 8 replicates"))
+PLUGIN = register(Sampler(NAME, module=__name__, rank=1, replicates=REPLICATES,
+                          doc="jittered strata per pair of dimensions, 8 replicates"))
 _ONE_BELOW = 1.0 - 2.0**-53
 _M32, _S32 = np.uint64(0xFFFFFFFF), np.uint64(32)
 _TO_UNIT32 = 2.0**-32

@@ -66,7 +66,8 @@ EXTRAPOLATION_LIMIT = 4.0
 def product_of_options(names: list[str], *, heuristics: list[str], allocations: list[str],
                        light_samplings: list[str | None], light_selections: list[str | None],
                        ris_settings: list[tuple[int, str]], light_samples: int | None = None,
-                       bsdf_samples: int | None = None, one_sample: bool | None = None) -> tuple[list[Strategy], str]:
+                       bsdf_samples: int | None = None,
+                       one_sample: bool | None = None) -> tuple[list[Strategy], str]:
     """Every strategy a comparison of the strategy ``names`` runs, with lists of options: mis with
     every heuristic and allocation, ris with every ``(candidates, sources)`` of ``ris_settings``,
     each strategy that takes light samples with every light sampling and selection (those that
@@ -84,8 +85,9 @@ def product_of_options(names: list[str], *, heuristics: list[str], allocations: 
     def make(name, ris=None, heuristic=None, allocation=None, sampling=None, selection=None) -> Strategy:
         candidates, sources = ris or (None, None)
         return Strategy.from_options(name, heuristic=heuristic, light_samples=light_samples,
-                                     bsdf_samples=bsdf_samples, one_sample=one_sample, light_selection=selection,
-                                     light_sampling=sampling, allocation=allocation, ris_candidates=candidates,
+                                     bsdf_samples=bsdf_samples, one_sample=one_sample,
+                                     light_selection=selection, light_sampling=sampling,
+                                     allocation=allocation, ris_candidates=candidates,
                                      ris_sources=sources)
 
     def weightings(name):

@@ -43,7 +43,8 @@ from .. import counts as taken
 from ..direction_samples import direction_arrays, direction_value
 
 NAME = "ris"
-PLUGIN = register(Combiner(NAME, module=__name__, rank=3, resamples=True, doc="resampled importance sampling"))
+PLUGIN = register(Combiner(NAME, module=__name__, rank=3, resamples=True,
+                           doc="resampled importance sampling"))
 
 
 @template
@@ -94,8 +95,8 @@ def resample(radiance, surfaces, light_tables, plan, direction, prim, shadow, re
     for row in range(len(prim)):
         if prim[row] < 0:
             continue
-        hit, dist, value, _, _ = direction_value(hit_table, first_sphere, light_tables, plan.heuristic, rays, row,
-                                                 prim[row])
+        hit, dist, value, _, _ = direction_value(hit_table, first_sphere, light_tables, plan.heuristic, rays,
+                                                 row, prim[row])
         if not hit:
             continue
         x = (points[row, 0], points[row, 1], points[row, 2])

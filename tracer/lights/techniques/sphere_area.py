@@ -23,8 +23,8 @@ centre, it covers the cone of half-angle theta_max with sin(theta_max) = r / d_c
   back and gives 0, as the sphere emits outward only).
 
 This module is the ``sphere_area`` technique (``--light-sampling area``); ``sphere_cone.py`` the
-cone. The selection probability is multiplied in by ``tracer.lights``. The pdfs of a direction that hits the sphere are pure functions of
-(x, wi, dist), so MIS weights of BSDF samples match.
+cone. The selection probability is multiplied in by ``tracer.lights``. The pdfs of a direction
+that hits the sphere are pure functions of (x, wi, dist), so MIS weights of BSDF samples match.
 
 =========  =====  ================================
 column     size   what

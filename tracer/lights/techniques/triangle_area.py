@@ -42,7 +42,8 @@ def rows(emitters) -> np.ndarray:
     return triangle_rows(emitters.corners, emitters.normal, emitters.emission, emitters.area)
 
 
-def triangle_rows(corners: np.ndarray, normal: np.ndarray, emission: np.ndarray, area: np.ndarray) -> np.ndarray:
+def triangle_rows(corners: np.ndarray, normal: np.ndarray, emission: np.ndarray,
+                  area: np.ndarray) -> np.ndarray:
     """``(T, WIDTH)`` rows of T triangles: corners (T, 3, 3), normal (T, 3), emission (T, 3),
     area (T,) > 0."""
     out = np.zeros((len(area), WIDTH))
