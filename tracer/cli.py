@@ -220,7 +220,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="with --create: longer side of the check's images and references in pixels "
                     "(default 64)")
     ch.add_argument("--sampler", choices=SAMPLERS, default=None, metavar="NAME",
-                    help=f"with --create: the sampler of every entry, one of %(choices)s (default {DEFAULT_SAMPLER})")
+                    help=f"with --create: the sampler of every entry, one of %(choices)s "
+                    f"(default {DEFAULT_SAMPLER})")
     ch.add_argument("--out", default="check_failures", help="where the maps of failing entries go")
     ch.add_argument("--seed-offset", type=_seed, default=0,
                     help="add this to every seed (other random numbers, same statistics)")
@@ -336,21 +337,25 @@ def _add_strategy_options(p: argparse.ArgumentParser, compared: bool = False) ->
                        "(default light)")
     else:
         p.add_argument("--light-selection", choices=LIGHT_SELECTIONS, default="power", metavar="NAME",
-                       help=f"how to pick the light to sample, one of %(choices)s: {selections}; default power")
+                       help=f"how to pick the light to sample, one of %(choices)s: {selections}; "
+                       "default power")
         p.add_argument("--ris-candidates", type=_ris_candidates, default=DEFAULT_RIS_CANDIDATES,
                        metavar="M",
                        help=f"ris: candidates per camera sample (default {DEFAULT_RIS_CANDIDATES})")
         p.add_argument("--ris-sources", choices=RIS_SOURCES, default=RIS_SOURCES[0],
                        help=f"ris: where candidates come from: {ris_sources}; default light")
     if compared:
-        listed = p.add_argument("--light-sampling", type=_names_of(LIGHT_SAMPLINGS), default=None, metavar="LIST",
+        listed = p.add_argument("--light-sampling", type=_names_of(LIGHT_SAMPLINGS), default=None,
+                                metavar="LIST",
                                 help="comma-separated light-sampling techniques to compare, each with every "
                                 "strategy that takes light samples: some of %(names)s "
-                                f"(default: the scene's [render] light_sampling, else {DEFAULT_LIGHT_SAMPLING})")
+                                "(default: the scene's [render] light_sampling, "
+                                f"else {DEFAULT_LIGHT_SAMPLING})")
         listed.names = LIGHT_SAMPLINGS  # read by the help text's %(names)s when help is printed
         return
     p.add_argument("--light-sampling", choices=LIGHT_SAMPLINGS, default=None, metavar="NAME",
-                   help="how to sample the chosen light, one of %(choices)s: by area, by the solid angle it subtends, or by "
+                   help="how to sample the chosen light, one of %(choices)s: by area, by the solid angle "
+                   "it subtends, or by "
                    "solid angle warped toward the receiver's cosine (default: the scene's [render] "
                    f"light_sampling, else {DEFAULT_LIGHT_SAMPLING})")
 
@@ -362,7 +367,8 @@ def _add_sampler_option(p: argparse.ArgumentParser, compared: bool = False, defa
             "Owen-scrambled Sobol points); the variance stays honest for each (8 independent replicates)")
     if compared:
         listed = p.add_argument("--sampler", type=_names_of(SAMPLERS), default=None, metavar="LIST",
-                                help=f"comma-separated samplers to compare, each with every strategy: some of "
+                                help=f"comma-separated samplers to compare, each with every strategy: "
+                                f"some of "
                                 f"{what} (default: the scene's [render] sampler, else {DEFAULT_SAMPLER})")
         listed.names = SAMPLERS  # read by the help text's %(names)s when help is printed
         return
@@ -431,6 +437,11 @@ def _cluster(args: argparse.Namespace):
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    quiet = bool(getattr(args, "quiet", False))
+    if quiet or "tracer.kernels.compiling" in sys.modules:
+        from .kernels import compiling
+
+        compiling.QUIET = quiet  # --quiet: no compile line on a terminal either
     previous = notices.set_handler(_print_note())
     # SIGTERM (kill, a batch scheduler's time limit) stops a command as Ctrl-C does, and neither
     # can be lost to a finalizer that drops its KeyboardInterrupt (tracer.interrupts).
@@ -486,10 +497,12 @@ def _strategy_from(args: argparse.Namespace, name: str, light_sampling: str | No
     candidates, sources = ris or (given("ris_candidates"), given("ris_sources"))
     try:
         return Strategy.from_options(
-            name, heuristic=heuristic or given("heuristic"), light_samples=getattr(args, "light_samples", None),
+            name, heuristic=heuristic or given("heuristic"),
+            light_samples=getattr(args, "light_samples", None),
             bsdf_samples=getattr(args, "bsdf_samples", None), one_sample=getattr(args, "one_sample", None),
             light_selection=light_selection or given("light_selection"),
-            light_sampling=light_sampling or given("light_sampling"), allocation=allocation or given("allocation"),
+            light_sampling=light_sampling or given("light_sampling"),
+            allocation=allocation or given("allocation"),
             ris_candidates=candidates, ris_sources=sources)
     except ValueError as exc:
         raise InputError(str(exc), "command line") from None
@@ -884,6 +897,9 @@ def _warn_if_reference_is_noisy(reference_relmse: float, runs, reference_path: s
 
 
 def cmd_check(args: argparse.Namespace) -> int:
+    from .kernels import prefer_shared
+
+    prefer_shared()  # its entries' scenes share one build per strategy and sampler
     with _cluster(args) as client:
         return _check(args, client)
 
@@ -939,7 +955,10 @@ def cmd_primer(args: argparse.Namespace) -> int:
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
+    from .kernels import prefer_shared
     from .study.stability import Cell, expectations, format_table, run_suite
+
+    prefer_shared()  # its cases' scenes share one build per strategy and sampler
 
     out = _output_folder(args.out)
     doc = run_suite(out, spp=args.spp, seed=args.seed, threads=args.threads, reference_spp=args.reference_spp,

@@ -63,8 +63,10 @@ class FeatureSet:
 
     def records(self) -> list[plugins.Plugin]:
         """The plug-in record of every name in this feature set."""
-        named = [("material", m) for m in self.materials] + [("light_technique", t) for t in self.light_techniques]
-        named += [("light_selection", self.light_selection), ("sampler", self.sampler), ("combiner", self.combiner)]
+        named = ([("material", m) for m in self.materials]
+                 + [("light_technique", t) for t in self.light_techniques])
+        named += [("light_selection", self.light_selection), ("sampler", self.sampler),
+                  ("combiner", self.combiner)]
         if self.direction is not None:
             named.append(("direction", self.direction))
         return [plugins.get(kind, name) for kind, name in named]
@@ -82,9 +84,9 @@ class FeatureSet:
         ignores them is built for (``templates.Template.ignores``)."""
         from dataclasses import replace
 
-        defaults = {"materials": (), "light_techniques": (), "light_selection": "power", "sampler": "independent",
-                    "direction": None, "combiner": "sum", "light_samples": False, "direction_samples": False,
-                    "learns": False}
+        defaults = {"materials": (), "light_techniques": (), "light_selection": "power",
+                    "sampler": "independent", "direction": None, "combiner": "sum", "light_samples": False,
+                    "direction_samples": False, "learns": False}
         unknown = set(fields) - set(defaults)
         if unknown:
             raise ValueError(f"no feature-set field {sorted(unknown)[0]!r} to ignore")
@@ -95,8 +97,8 @@ class FeatureSet:
         build that renders of many scenes share (``shared_builds``)."""
         from dataclasses import replace
 
-        return replace(self, materials=plugins.names("material"), light_techniques=plugins.names("light_technique"),
-                       shared=True)
+        return replace(self, materials=plugins.names("material"),
+                       light_techniques=plugins.names("light_technique"), shared=True)
 
     def describe(self) -> str:
         """One line of what is compiled: ``diffuse, roughconductor; triangle_area; power; ...``."""
@@ -113,18 +115,30 @@ class FeatureSet:
 # per strategy and sampler instead of compiling one per scene. The kernels give the same bits
 # (tests/test_kernels.py); they call the materials and techniques instead of inlining them, which
 # costs render time (about 8%) and saves most of each build's compilation.
+# Without the variable: per scene, unless a command that renders many scenes asked for shared
+# builds (``prefer_shared``: ``tracer check`` and ``tracer stability``, whose dozens of scenes
+# would otherwise compile a build each; measured: stability over 15 min from an empty cache).
 SHARED_BUILDS_VARIABLE = "TRACER_KERNELS"
+_default_mode = "scene"
+
+
+def prefer_shared() -> None:
+    """Make shared builds this process's default (``TRACER_KERNELS`` still decides if set)."""
+    global _default_mode
+    _default_mode = "shared"
 
 
 def shared_builds() -> bool:
-    """Whether renders share one build per strategy and sampler (``SHARED_BUILDS_VARIABLE``)."""
+    """Whether renders share one build per strategy and sampler (``SHARED_BUILDS_VARIABLE``,
+    else the process's default, ``prefer_shared``)."""
     import os
 
-    value = os.environ.get(SHARED_BUILDS_VARIABLE, "scene")
+    value = os.environ.get(SHARED_BUILDS_VARIABLE, _default_mode)
     if value not in ("scene", "shared"):
         from ..errors import InputError
 
-        raise InputError(f"{SHARED_BUILDS_VARIABLE}={value[:40]!r}: expected 'scene' or 'shared'", "environment")
+        raise InputError(f"{SHARED_BUILDS_VARIABLE}={value[:40]!r}: expected 'scene' or 'shared'",
+                         "environment")
     return value == "shared"
 
 

@@ -41,6 +41,10 @@ from .templates import Template
 
 # Seconds a compilation may run before the line says so (a cache load takes less).
 QUIET_SECONDS = 1.0
+# On a terminal the line is shown even for renders that show no progress of their own (the many
+# renders of tracer stability and check), unless the command was asked to be quiet (``--quiet``
+# sets this): a first use there compiles for minutes.
+QUIET = False
 
 
 @dataclass
@@ -92,7 +96,8 @@ def compile_all(features, calls: list[Call], what: str, progress: bool) -> float
             dispatcher.compile(types)
         return 0.0
     start = time.perf_counter()
-    line = _ProgressLine(f"tracer: compiling the kernels for {what} (kept for the next runs)", progress)
+    line = _ProgressLine(f"tracer: compiling the kernels for {what} (kept for the next runs)",
+                         progress or (not QUIET and sys.stderr.isatty()))
     child = None
     try:
         with _exclusive(features, [job[1] for job in missing], line) as waited:
