@@ -43,6 +43,36 @@ DEFAULT_LIGHT_SAMPLING = "area"
 DEFAULT_LIGHT_SELECTION = "power"
 DEFAULT_HEURISTIC = "power"
 
+# One line each for help texts and the reference pages (``tracer.manual``; a test checks that
+# every name has one).
+STRATEGY_DOCS = {
+    "uniform": "direction samples uniform over the hemisphere, pdf 1 / 2pi",
+    "cosine": "direction samples by the cosine, pdf cos / pi",
+    "bsdf": "direction samples from the material's own sampling (its lobes)",
+    "light": "light samples: an emitter chosen by the light selection, a point or direction on it "
+             "by the light sampling; sees delta lights",
+    "mis": "light and BSDF samples combined with MIS weights (--heuristic), N light + M BSDF "
+           "samples or one of the two at random (--one-sample)",
+    "ris": "resampled importance sampling: M candidates weighed by their unshadowed contribution, "
+           "one kept, one shadow ray",
+}
+HEURISTIC_DOCS = {
+    "balance": "w_i = n_i p_i / sum_k n_k p_k (Veach 1997)",
+    "power": "w_i = (n_i p_i)^2 / sum_k (n_k p_k)^2, exponent 2 (Veach 1997)",
+    "max": "w_i = 1 for the technique of largest n_i p_i, else 0 (Veach 1997)",
+    "optimal": "balance plus a control variate whose coefficient each pixel learns between passes "
+               "(Kondapaneni et al. 2019)",
+}
+ALLOCATION_DOCS = {
+    "fixed": "every camera sample takes N light and M BSDF samples",
+    "adaptive": "each pixel splits its N + M samples as earlier passes measured best (Sbert et al. 2016)",
+}
+RIS_SOURCE_DOCS = {
+    "light": "every candidate is a light sample",
+    "light+bsdf": "half the candidates are light samples and half BSDF samples, with MIS-weighted "
+                  "candidate pdfs",
+}
+
 
 def light_samplings() -> tuple[str, ...]:
     """Every ``--light-sampling`` value: each name a light technique lists."""

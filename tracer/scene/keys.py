@@ -1,0 +1,119 @@
+"""The keys of the TOML scene format, table by table: what the reader accepts and the reference
+page lists (``tracer.manual``).
+
+The reader (``tracer.scene.toml_reader``) reads each table through a ``Section`` of this
+module: asking for a key the section does not declare is a programming error, and a key in
+the file that the section does not declare is refused with the closest declared one named. So
+the documentation cannot list a key the reader refuses, nor miss one it reads. Material
+parameters are declared by each material's module (``tracer.materials``), not here.
+
+``type`` and ``default`` are text for people; the checks themselves (ranges, lengths) are in
+the reader, and docs/SCENE_FORMAT.md explains the conventions behind them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Key:
+    """One key of a table: its name, its type and default as the reference states them, and
+    its meaning."""
+
+    name: str
+    type: str
+    default: str
+    doc: str
+
+
+@dataclass(frozen=True)
+class Section:
+    """The keys one table of a scene may hold. ``header`` is how a scene file writes the table,
+    ``doc`` one sentence on what it is for."""
+
+    header: str
+    doc: str
+    keys: tuple[Key, ...]
+
+    def names(self) -> tuple[str, ...]:
+        return tuple(k.name for k in self.keys)
+
+
+REQUIRED = "required"
+VEC3 = "3 numbers"
+
+TOP = Section("top level", "The tables of a scene file.", (
+    Key("render", "table", "none", "defaults for `tracer render`"),
+    Key("camera", "table", REQUIRED, "the pinhole camera"),
+    Key("materials", "table of tables", "none", "`[materials.NAME]`, one table per material"),
+    Key("shapes", "array of tables", "none", "`[[shapes]]`: geometry, optionally emitting"),
+    Key("lights", "array of tables", "none", "`[[lights]]`: point lights"),
+))
+
+RENDER = Section("[render]", "Defaults of `tracer render`; its flags win. `reference`, `compare` and "
+                 "`tracer.render` take `light_sampling` and `sampler` from here when not given.", (
+    Key("spp", "integer >= 1", "64", "samples per pixel"),
+    Key("strategy", "string", "mis", "a strategy name (see the plug-in page)"),
+    Key("light_sampling", "string", "area", "how a chosen light is sampled: area, solid-angle, "
+        "solid-angle-cos"),
+    Key("sampler", "string", "independent", "where the random numbers come from: a sampler name"),
+))
+
+CAMERA = Section("[camera]", "The pinhole camera; a pixel is the plain mean of its samples (a box "
+                 "filter).", (
+    Key("origin", VEC3, REQUIRED, "eye position"),
+    Key("target", VEC3, REQUIRED, "a point the camera looks at; must differ from origin"),
+    Key("up", VEC3, "[0, 1, 0]", "not zero, not parallel to target - origin"),
+    Key("fov", "number in (0, 179]", REQUIRED, "vertical field of view in degrees"),
+    Key("width", "integer 1 .. 32768", "256", "pixels; --width replaces it"),
+    Key("height", "integer 1 .. 32768", "256", "pixels; --height replaces it"),
+    Key("mirrored", "boolean", "false", "the image's x axis runs the other way (a Mitsuba sensor "
+        "whose transform has a negative determinant)"),
+))
+
+MATERIAL = Section("[materials.NAME]", "One material; NAME is any TOML key, which shapes refer to. "
+                   "The other keys are the type's parameters (plug-in page).", (
+    Key("type", "string", REQUIRED, "a material type: diffuse, mirror, conductor, ... (plug-in page)"),
+    Key("twosided", "boolean", "true", "reflects on both sides; false: black seen from behind"),
+))
+
+_SHAPE_COMMON = (
+    Key("type", "string", REQUIRED, "quad, sphere or mesh"),
+    Key("material", "string", "none (black)", "the NAME of a [materials.NAME] table"),
+    Key("emission", VEC3 + " >= 0, <= 1e18", "[0, 0, 0]", "radiance leaving the front side: an "
+        "area light"),
+)
+
+QUAD = Section("[[shapes]] type = \"quad\"", "A parallelogram of two triangles; front = "
+               "normalize(edge1 x edge2).", _SHAPE_COMMON + (
+    Key("origin", VEC3, REQUIRED, "corner o"),
+    Key("edge1", VEC3, REQUIRED, "the corners are o, o + edge1, o + edge1 + edge2, o + edge2"),
+    Key("edge2", VEC3, REQUIRED, "see edge1"),
+))
+
+SPHERE = Section("[[shapes]] type = \"sphere\"", "A true sphere, intersected exactly, emitting from "
+                 "its outside; with subdivisions, an icosphere mesh.", _SHAPE_COMMON + (
+    Key("center", VEC3, REQUIRED, "centre"),
+    Key("radius", "number > 0", REQUIRED, "at least 1e-6 times the largest centre coordinate"),
+    Key("subdivisions", "integer 0 .. 7", "none (a true sphere)", "an icosphere of 20 * 4^s "
+        "triangles instead"),
+))
+
+MESH = Section("[[shapes]] type = \"mesh\"", "A triangle mesh file read by trimesh (.ply, .obj, "
+               ".stl, .glb, ...).", _SHAPE_COMMON + (
+    Key("file", "string", REQUIRED, "the mesh file, relative to the scene file's folder"),
+    Key("normals", "string", "face", "face: flat shading with each triangle's normal; vertex: "
+        "the file's vertex normals (or angle-weighted ones) interpolated"),
+))
+
+POINT_LIGHT = Section("[[lights]] type = \"point\"", "A point light: a delta light, seen by light "
+                      "sampling only.", (
+    Key("type", "string", REQUIRED, "point"),
+    Key("position", VEC3, REQUIRED, "world position"),
+    Key("intensity", VEC3 + " >= 0, <= 1e18", REQUIRED, "radiant intensity, W/sr per channel"),
+))
+
+SHAPES = {"quad": QUAD, "sphere": SPHERE, "mesh": MESH}
+# Every section, in the order the reference lists them.
+SECTIONS = (TOP, RENDER, CAMERA, MATERIAL, QUAD, SPHERE, MESH, POINT_LIGHT)
