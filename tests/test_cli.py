@@ -3,9 +3,15 @@ contract; the image does not depend on the thread count."""
 
 from __future__ import annotations
 
+import codecs
+import errno
+import os
 import re
+import signal
 import subprocess
 import sys
+import threading
+import time
 import tomllib
 from pathlib import Path
 
@@ -17,7 +23,7 @@ from tracer.cli import main
 from tracer.film import Film
 from tracer.imagefiles import CHANNELS, read_exr, write_exr
 from tracer.record import RenderRecord
-from tracer.render_loop import SAMPLES_PER_PASS, RenderSettings, plan_batches, render
+from tracer.render_loop import SAMPLES_PER_PASS, RenderSettings, pass_samples, plan_batches, render
 from tracer.scene import load_scene
 from tracer.strategy import Strategy
 
@@ -270,6 +276,148 @@ def test_resumed_samples_are_fresh(tmp_path):
     assert a.spp == 8 and isinstance(a, Film)
 
 
+# How long a test waits for a tracer subprocess to say what it waits for, before it fails with
+# what was said: only a child that hangs or is broken should reach it. Far beyond a first
+# compilation of the suite's kernels on a loaded machine (53 s on 2 idle cores, with a second
+# process compiling alongside; at load 5-10 tracer compiles in one process and gets a fraction
+# of a core).
+SAID_DEADLINE = 600.0
+
+# tqdm's counter of the samples done, "| 97.9k/384k [" (unit_scale: k, M, G, ... by 1000).
+_SAMPLES_DONE = re.compile(r"\| (\d+(?:\.\d+)?)([kMGTPEZY]?)/\d")
+
+
+def _samples_done(text: str) -> float:
+    """The samples the last progress bar drawn in ``text`` counts as done (0 before any)."""
+    counts = _SAMPLES_DONE.findall(text)
+    if not counts:
+        return 0.0
+    number, prefix = counts[-1]
+    return float(number) * 1000.0 ** " kMGTPEZY".index(prefix or " ")
+
+
+def _as_shown(text: str) -> str:
+    """``text`` as a terminal shows it: "\r\n" ends a line, and after a "\r" (tqdm redraws
+    its bar with one, and clears it with spaces) what follows overwrites the line from its start."""
+    lines = []
+    for raw in text.replace("\r\n", "\n").split("\n"):
+        line = ""
+        for part in raw.split("\r"):
+            line = part + line[len(part):]
+        lines.append(line.rstrip())
+    return "\n".join(lines)
+
+
+class _Tracer:
+    """A ``python -m tracer ARGV`` subprocess whose stderr a thread collects until EOF, so that
+    a test waits for what tracer says (:meth:`wait_for`), never for a number of seconds: at load
+    5-10 a fixed sleep ran out while tracer was still importing or compiling, and the signal
+    meant for a render in progress landed before it.
+
+    With ``tty`` stderr is a pseudo-terminal, as at a shell: tracer draws its progress bar only
+    on a terminal (``render_loop.progress_bar``; on a pipe a render says nothing until it ends),
+    and the bar's count of samples done is what says the render is under way
+    (:meth:`wait_for_samples`). Each of three things about a pty hangs a test that gets it wrong:
+    the parent must close its copy of the slave end, or reading never reaches EOF; on Linux EOF
+    on the master is an ``EIO`` error, not an empty read; and the master must be read until
+    then, also after the signal, or the child blocks writing its bar (redrawn every 0.1 s) once
+    the pty's few kilobytes of buffer are full, and never gets to stop. The terminal turns "\n"
+    into "\r\n" and tqdm redraws with "\r": :attr:`err` is the text as the terminal shows it.
+
+    SIGINT is at its default in the child: a non-interactive shell may start us with SIGINT
+    ignored, and Python then keeps it ignored. A test that fails leaves no child running."""
+
+    def __init__(self, argv: list[str], env: dict | None = None, tty: bool = False):
+        import fcntl
+        import pty
+        import struct
+        import termios
+
+        if tty:
+            read_fd, write_fd = pty.openpty()
+            # Wide, so that tqdm draws its whole bar, counter included, on one line.
+            fcntl.ioctl(write_fd, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 200, 0, 0))
+        else:
+            read_fd, write_fd = os.pipe()
+        try:
+            self.proc = subprocess.Popen([sys.executable, "-m", "tracer", *argv], stderr=write_fd, env=env,
+                                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        except BaseException:
+            os.close(read_fd)
+            raise
+        finally:
+            os.close(write_fd)  # the child has its own copy: EOF comes when it exits
+        self._text = ""
+        self._eof = False
+        self._changed = threading.Condition()
+        self._reader = threading.Thread(target=self._read, args=(read_fd,), daemon=True)
+        self._reader.start()
+
+    def _read(self, fd: int) -> None:
+        decoder = codecs.getincrementaldecoder("utf-8")(errors="replace")
+        try:
+            while True:
+                try:
+                    chunk = os.read(fd, 65536)
+                except OSError as exc:
+                    if exc.errno != errno.EIO:  # EIO: EOF on a pty's master
+                        raise
+                    chunk = b""
+                with self._changed:
+                    self._text += decoder.decode(chunk, final=not chunk)
+                    self._changed.notify_all()
+                if not chunk:
+                    return
+        finally:
+            os.close(fd)
+            with self._changed:
+                self._eof = True
+                self._changed.notify_all()
+
+    @property
+    def err(self) -> str:
+        """What tracer wrote to stderr so far, as a terminal (or a file, for a pipe) shows it."""
+        with self._changed:
+            return _as_shown(self._text)
+
+    def wait_for(self, condition, what: str):
+        """Wait until ``condition(the raw text said so far)`` is true and return its value;
+        fail, with what was said, if tracer closes stderr (ends) first or SAID_DEADLINE passes."""
+        deadline = time.monotonic() + SAID_DEADLINE
+        with self._changed:
+            while not (found := condition(self._text)):
+                left = deadline - time.monotonic()
+                assert not self._eof, f"tracer ended before {what}; it said:\n{self.err}"
+                assert left > 0, f"no {what} in {SAID_DEADLINE:.0f} s; tracer said:\n{self.err}"
+                self._changed.wait(left)
+            return found
+
+    def wait_for_samples(self, more_than: float) -> float:
+        """Wait until the progress bar counts more than ``more_than`` samples done (tqdm rounds
+        the count to 3 digits); returns the count."""
+        def past(text: str) -> float | None:
+            done = _samples_done(text)
+            return done if done > more_than else None
+
+        return self.wait_for(past, f"progress bar past {more_than:.0f} samples")
+
+    def finish(self, timeout: float = 120) -> tuple[int, str]:
+        """Wait for tracer to end and for the rest of its stderr: (exit status, :attr:`err`)."""
+        code = self.proc.wait(timeout=timeout)
+        self._reader.join(timeout)
+        assert not self._reader.is_alive(), f"stderr still open after tracer ended; it said:\n{self.err}"
+        return code, self.err
+
+    def __enter__(self) -> "_Tracer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.proc.poll() is None:  # the test failed: leave no render running
+            self.proc.kill()
+            self.proc.wait()
+        self._reader.join(30)
+
+
 def _start_render(scene, out, spp: int, env=None):
     """A ``tracer render`` subprocess with SIGINT at its default (a non-interactive shell may
     start us with SIGINT ignored; Python then keeps it ignored)."""
@@ -280,27 +428,26 @@ def _start_render(scene, out, spp: int, env=None):
                             env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
+def _render_argv(scene, out, spp: int, *options: str) -> list[str]:
+    return ["render", str(scene), "-o", str(out), "--spp", str(spp), "--threads", "2", *options]
+
+
 @pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
 def test_interrupt_writes_what_was_rendered(tmp_path, signum):
     """Ctrl-C (or kill) mid-render: exit status 130, the EXR holds every finished sample with its
-    true spp (fewer than asked), and no temporary file is left behind. A first tiny render
-    fills the kernel cache, so that the signal lands while rendering, not while compiling."""
-    import signal
-    import time
-
+    true spp (fewer than asked), and no temporary file is left behind. The signal is sent once
+    the progress bar counts more than two passes of samples done, so that it lands while
+    rendering (not while tracer still loads or compiles), whatever the machine's load."""
     scene = tmp_path / "s.toml"
     scene.write_text(GOOD)
     out = tmp_path / "r.exr"
-    warm = _start_render(scene, out, 1)
-    assert warm.wait(timeout=300) == 0, warm.stderr.read()
-    warm.stderr.close()
-    out.unlink()
-    out.with_suffix(".png").unlink()
-    proc = _start_render(scene, out, 10_000_000)
-    time.sleep(4.0)
-    proc.send_signal(getattr(signal, signum))
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
+    spp, pixels = 10_000_000, 16 * 12
+    one_pass = pixels * pass_samples(spp, pixels, Strategy("mis").samples_per_lane)
+    with _Tracer(_render_argv(scene, out, spp), tty=True) as child:
+        child.wait_for_samples(2 * one_pass)
+        child.proc.send_signal(getattr(signal, signum))
+        code, err = child.finish()
+    assert code == 130, err
     assert "interrupted" in err and "Traceback" not in err
     film = read_exr(out)
     assert 0 < film.spp < 10_000_000
