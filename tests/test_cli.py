@@ -461,26 +461,32 @@ def test_interrupt_writes_what_was_rendered(tmp_path, signum):
 
 @pytest.mark.slow  # one whole compilation of the kernels in a child process: 92 s of the 14-minute CI run
 def test_interrupt_while_compiling_leaves_files_alone(tmp_path):
-    """Ctrl-C during the first compilation (an empty kernel cache, so compiling takes seconds):
-    the render stops once the kernels are compiled (an interrupt inside numba's compiler would
-    break it), exit 130 with no traceback, a line saying nothing was written, and an existing
-    output file is left as it was (nothing was rendered, so nothing is written over it)."""
-    import os
-    import signal
-    import time
-
+    """Ctrl-C during the first compilation (an empty kernel cache, so compiling takes seconds),
+    sent once tracer's line says it is compiling: the render stops once the kernels are compiled
+    (an interrupt inside numba's compiler would break it), exit 130 with no traceback, and
+    besides the compile line (on a pipe every ten seconds, and once more when done) only a line
+    saying it stops after compiling and one saying nothing was written; an existing output file
+    is left as it was (nothing was rendered, so nothing is written over it)."""
     scene = tmp_path / "s.toml"
     scene.write_text(GOOD)
     out = tmp_path / "r.exr"
     out.write_bytes(b"an earlier render")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    proc = _start_render(scene, out, 4, env=env)
-    time.sleep(3.0)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
+    compiling = "tracer: compiling the kernels"
+    # The compile line's messages: "...: 1 s", ..., "...: done in 52.6 s".
+    progress = re.compile(re.escape(compiling) + r".*?: (?:\d+ s|done in \d+\.\d s)")
+    with _Tracer(_render_argv(scene, out, 4), env=env) as child:
+        # The whole line: print() writes its newline apart, and a note printed from another
+        # thread (as the signal's is) can land between the two.
+        child.wait_for(lambda text: re.search(progress.pattern + "\n", text), "compile line")
+        child.proc.send_signal(signal.SIGINT)
+        code, err = child.finish()
+    assert code == 130, err
     assert "Traceback" not in err and "nothing written" in err.strip().splitlines()[-1], err
-    assert len(err.strip().splitlines()) <= 2, err
+    assert "done in" in progress.findall(err)[-1], err
+    said = [line for line in progress.sub("", err).splitlines() if line]
+    assert said[:1] == ["tracer: interrupted; stopping as soon as the kernels are compiled"], err
+    assert len(said) <= 2, err
     assert out.read_bytes() == b"an earlier render"
 
 
