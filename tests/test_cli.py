@@ -401,8 +401,10 @@ class _Tracer:
 
         return self.wait_for(past, f"progress bar past {more_than:.0f} samples")
 
-    def finish(self, timeout: float = 120) -> tuple[int, str]:
-        """Wait for tracer to end and for the rest of its stderr: (exit status, :attr:`err`)."""
+    def finish(self, timeout: float = SAID_DEADLINE) -> tuple[int, str]:
+        """Wait for tracer to end and for the rest of its stderr: (exit status, :attr:`err`).
+        As long by default as any wait: a render interrupted while compiling ends only once
+        compiled, which at load 6 took more than the 120 s the tests once allowed."""
         code = self.proc.wait(timeout=timeout)
         self._reader.join(timeout)
         assert not self._reader.is_alive(), f"stderr still open after tracer ended; it said:\n{self.err}"
