@@ -3,9 +3,15 @@ contract; the image does not depend on the thread count."""
 
 from __future__ import annotations
 
+import codecs
+import errno
+import os
 import re
+import signal
 import subprocess
 import sys
+import threading
+import time
 import tomllib
 from pathlib import Path
 
@@ -17,7 +23,7 @@ from tracer.cli import main
 from tracer.film import Film
 from tracer.imagefiles import CHANNELS, read_exr, write_exr
 from tracer.record import RenderRecord
-from tracer.render_loop import SAMPLES_PER_PASS, RenderSettings, plan_batches, render
+from tracer.render_loop import SAMPLES_PER_PASS, RenderSettings, pass_samples, plan_batches, render
 from tracer.scene import load_scene
 from tracer.strategy import Strategy
 
@@ -270,37 +276,170 @@ def test_resumed_samples_are_fresh(tmp_path):
     assert a.spp == 8 and isinstance(a, Film)
 
 
-def _start_render(scene, out, spp: int, env=None):
-    """A ``tracer render`` subprocess with SIGINT at its default (a non-interactive shell may
-    start us with SIGINT ignored; Python then keeps it ignored)."""
-    import signal
+# How long a test waits for a tracer subprocess to say what it waits for, before it fails with
+# what was said: only a child that hangs or is broken should reach it. Far beyond a first
+# compilation of the suite's kernels on a loaded machine (53 s on 2 idle cores, with a second
+# process compiling alongside; at load 5-10 tracer compiles in one process and gets a fraction
+# of a core).
+SAID_DEADLINE = 600.0
 
-    return subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(out),
-                             "--spp", str(spp), "--threads", "2"], stderr=subprocess.PIPE, text=True,
-                            env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+# tqdm's counter of the samples done, "| 97.9k/384k [" (unit_scale: k, M, G, ... by 1000).
+_SAMPLES_DONE = re.compile(r"\| (\d+(?:\.\d+)?)([kMGTPEZY]?)/\d")
+
+
+def _samples_done(text: str) -> float:
+    """The samples the last progress bar drawn in ``text`` counts as done (0 before any)."""
+    counts = _SAMPLES_DONE.findall(text)
+    if not counts:
+        return 0.0
+    number, prefix = counts[-1]
+    return float(number) * 1000.0 ** " kMGTPEZY".index(prefix or " ")
+
+
+def _as_shown(text: str) -> str:
+    """``text`` as a terminal shows it: "\r\n" ends a line, and after a "\r" (tqdm redraws
+    its bar with one, and clears it with spaces) what follows overwrites the line from its start."""
+    lines = []
+    for raw in text.replace("\r\n", "\n").split("\n"):
+        line = ""
+        for part in raw.split("\r"):
+            line = part + line[len(part):]
+        lines.append(line.rstrip())
+    return "\n".join(lines)
+
+
+class _Tracer:
+    """A ``python -m tracer ARGV`` subprocess whose stderr a thread collects until EOF, so that
+    a test waits for what tracer says (:meth:`wait_for`), never for a number of seconds: at load
+    5-10 a fixed sleep ran out while tracer was still importing or compiling, and the signal
+    meant for a render in progress landed before it.
+
+    With ``tty`` stderr is a pseudo-terminal, as at a shell: tracer draws its progress bar only
+    on a terminal (``render_loop.progress_bar``; on a pipe a render says nothing until it ends),
+    and the bar's count of samples done is what says the render is under way
+    (:meth:`wait_for_samples`). Each of three things about a pty hangs a test that gets it wrong:
+    the parent must close its copy of the slave end, or reading never reaches EOF; on Linux EOF
+    on the master is an ``EIO`` error, not an empty read; and the master must be read until
+    then, also after the signal, or the child blocks writing its bar (redrawn every 0.1 s) once
+    the pty's few kilobytes of buffer are full, and never gets to stop. The terminal turns "\n"
+    into "\r\n" and tqdm redraws with "\r": :attr:`err` is the text as the terminal shows it.
+
+    SIGINT is at its default in the child: a non-interactive shell may start us with SIGINT
+    ignored, and Python then keeps it ignored. A test that fails leaves no child running."""
+
+    def __init__(self, argv: list[str], env: dict | None = None, tty: bool = False):
+        import fcntl
+        import pty
+        import struct
+        import termios
+
+        if tty:
+            read_fd, write_fd = pty.openpty()
+            # Wide, so that tqdm draws its whole bar, counter included, on one line.
+            fcntl.ioctl(write_fd, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 200, 0, 0))
+        else:
+            read_fd, write_fd = os.pipe()
+        try:
+            self.proc = subprocess.Popen([sys.executable, "-m", "tracer", *argv], stderr=write_fd, env=env,
+                                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        except BaseException:
+            os.close(read_fd)
+            raise
+        finally:
+            os.close(write_fd)  # the child has its own copy: EOF comes when it exits
+        self._text = ""
+        self._eof = False
+        self._changed = threading.Condition()
+        self._reader = threading.Thread(target=self._read, args=(read_fd,), daemon=True)
+        self._reader.start()
+
+    def _read(self, fd: int) -> None:
+        decoder = codecs.getincrementaldecoder("utf-8")(errors="replace")
+        try:
+            while True:
+                try:
+                    chunk = os.read(fd, 65536)
+                except OSError as exc:
+                    if exc.errno != errno.EIO:  # EIO: EOF on a pty's master
+                        raise
+                    chunk = b""
+                with self._changed:
+                    self._text += decoder.decode(chunk, final=not chunk)
+                    self._changed.notify_all()
+                if not chunk:
+                    return
+        finally:
+            os.close(fd)
+            with self._changed:
+                self._eof = True
+                self._changed.notify_all()
+
+    @property
+    def err(self) -> str:
+        """What tracer wrote to stderr so far, as a terminal (or a file, for a pipe) shows it."""
+        with self._changed:
+            return _as_shown(self._text)
+
+    def wait_for(self, condition, what: str):
+        """Wait until ``condition(the raw text said so far)`` is true and return its value;
+        fail, with what was said, if tracer closes stderr (ends) first or SAID_DEADLINE passes."""
+        deadline = time.monotonic() + SAID_DEADLINE
+        with self._changed:
+            while not (found := condition(self._text)):
+                left = deadline - time.monotonic()
+                assert not self._eof, f"tracer ended before {what}; it said:\n{self.err}"
+                assert left > 0, f"no {what} in {SAID_DEADLINE:.0f} s; tracer said:\n{self.err}"
+                self._changed.wait(left)
+            return found
+
+    def wait_for_samples(self, more_than: float) -> float:
+        """Wait until the progress bar counts more than ``more_than`` samples done (tqdm rounds
+        the count to 3 digits); returns the count."""
+        def past(text: str) -> float | None:
+            done = _samples_done(text)
+            return done if done > more_than else None
+
+        return self.wait_for(past, f"progress bar past {more_than:.0f} samples")
+
+    def finish(self, timeout: float = SAID_DEADLINE) -> tuple[int, str]:
+        """Wait for tracer to end and for the rest of its stderr: (exit status, :attr:`err`).
+        As long by default as any wait: a render interrupted while compiling ends only once
+        compiled, which at load 6 took more than the 120 s the tests once allowed."""
+        code = self.proc.wait(timeout=timeout)
+        self._reader.join(timeout)
+        assert not self._reader.is_alive(), f"stderr still open after tracer ended; it said:\n{self.err}"
+        return code, self.err
+
+    def __enter__(self) -> "_Tracer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.proc.poll() is None:  # the test failed: leave no render running
+            self.proc.kill()
+            self.proc.wait()
+        self._reader.join(30)
+
+
+def _render_argv(scene, out, spp: int, *options: str) -> list[str]:
+    return ["render", str(scene), "-o", str(out), "--spp", str(spp), "--threads", "2", *options]
 
 
 @pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
 def test_interrupt_writes_what_was_rendered(tmp_path, signum):
     """Ctrl-C (or kill) mid-render: exit status 130, the EXR holds every finished sample with its
-    true spp (fewer than asked), and no temporary file is left behind. A first tiny render
-    fills the kernel cache, so that the signal lands while rendering, not while compiling."""
-    import signal
-    import time
-
+    true spp (fewer than asked), and no temporary file is left behind. The signal is sent once
+    the progress bar counts more than two passes of samples done, so that it lands while
+    rendering (not while tracer still loads or compiles), whatever the machine's load."""
     scene = tmp_path / "s.toml"
     scene.write_text(GOOD)
     out = tmp_path / "r.exr"
-    warm = _start_render(scene, out, 1)
-    assert warm.wait(timeout=300) == 0, warm.stderr.read()
-    warm.stderr.close()
-    out.unlink()
-    out.with_suffix(".png").unlink()
-    proc = _start_render(scene, out, 10_000_000)
-    time.sleep(4.0)
-    proc.send_signal(getattr(signal, signum))
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
+    spp, pixels = 10_000_000, 16 * 12
+    one_pass = pixels * pass_samples(spp, pixels, Strategy("mis").samples_per_lane)
+    with _Tracer(_render_argv(scene, out, spp), tty=True) as child:
+        child.wait_for_samples(2 * one_pass)
+        child.proc.send_signal(getattr(signal, signum))
+        code, err = child.finish()
+    assert code == 130, err
     assert "interrupted" in err and "Traceback" not in err
     film = read_exr(out)
     assert 0 < film.spp < 10_000_000
@@ -314,26 +453,32 @@ def test_interrupt_writes_what_was_rendered(tmp_path, signum):
 
 @pytest.mark.slow  # one whole compilation of the kernels in a child process: 92 s of the 14-minute CI run
 def test_interrupt_while_compiling_leaves_files_alone(tmp_path):
-    """Ctrl-C during the first compilation (an empty kernel cache, so compiling takes seconds):
-    the render stops once the kernels are compiled (an interrupt inside numba's compiler would
-    break it), exit 130 with no traceback, a line saying nothing was written, and an existing
-    output file is left as it was (nothing was rendered, so nothing is written over it)."""
-    import os
-    import signal
-    import time
-
+    """Ctrl-C during the first compilation (an empty kernel cache, so compiling takes seconds),
+    sent once tracer's line says it is compiling: the render stops once the kernels are compiled
+    (an interrupt inside numba's compiler would break it), exit 130 with no traceback, and
+    besides the compile line (on a pipe every ten seconds, and once more when done) only a line
+    saying it stops after compiling and one saying nothing was written; an existing output file
+    is left as it was (nothing was rendered, so nothing is written over it)."""
     scene = tmp_path / "s.toml"
     scene.write_text(GOOD)
     out = tmp_path / "r.exr"
     out.write_bytes(b"an earlier render")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    proc = _start_render(scene, out, 4, env=env)
-    time.sleep(3.0)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
+    compiling = "tracer: compiling the kernels"
+    # The compile line's messages: "...: 1 s", ..., "...: done in 52.6 s".
+    progress = re.compile(re.escape(compiling) + r".*?: (?:\d+ s|done in \d+\.\d s)")
+    with _Tracer(_render_argv(scene, out, 4), env=env) as child:
+        # The whole line: print() writes its newline apart, and a note printed from another
+        # thread (as the signal's is) can land between the two.
+        child.wait_for(lambda text: re.search(progress.pattern + "\n", text), "compile line")
+        child.proc.send_signal(signal.SIGINT)
+        code, err = child.finish()
+    assert code == 130, err
     assert "Traceback" not in err and "nothing written" in err.strip().splitlines()[-1], err
-    assert len(err.strip().splitlines()) <= 2, err
+    assert "done in" in progress.findall(err)[-1], err
+    said = [line for line in progress.sub("", err).splitlines() if line]
+    assert said[:1] == ["tracer: interrupted; stopping as soon as the kernels are compiled"], err
+    assert len(said) <= 2, err
     assert out.read_bytes() == b"an earlier render"
 
 
@@ -488,36 +633,31 @@ def test_seeds_and_sample_indices_past_32_bits_round_trip(tmp_path):
 
 @pytest.mark.slow  # 12 s: slow since tracer 0.8, for the CI budget (Ctrl-C is tested in every run above)
 def test_a_billion_spp_render_has_flat_memory_and_stops_on_ctrl_c(tmp_path):
-    """`--spp 1000000000` at 64x64: resident memory between 3 s and 9 s into the render grows
-    by less than 40 MiB (the batch plan is lazy and the film fixed-size; a plan built up front
-    grew by about 40 MB/s), and Ctrl-C then writes what was rendered (exit 130). A first tiny
-    render fills the kernel cache so that the process renders, not compiles, while measured."""
-    import signal
-    import time
-
+    """`--spp 1000000000` at 64x64: resident memory grows by less than 40 MiB while the render
+    draws 20 M samples, from when its progress bar counts two passes done (the batch plan is
+    lazy and the film fixed-size), and Ctrl-C then writes what was rendered (exit 130). Counted
+    in samples, not seconds, so that a loaded machine measures the same stretch of the render.
+    A plan built up front grew by about 40 MB/s before the first batch: the bar would not start,
+    and the test fails at the wait's deadline (SAID_DEADLINE) saying so."""
     scene = tmp_path / "s.toml"
     scene.write_text(GOOD)
     out = tmp_path / "r.exr"
-    warm = _start_render(scene, out, 1)
-    assert warm.wait(timeout=300) == 0
-    warm.stderr.close()
+    spp, pixels = 1_000_000_000, 64 * 64
+    one_pass = pixels * pass_samples(spp, pixels, Strategy("mis").samples_per_lane)
 
     def rss_mib(pid: int) -> float:
         status = Path(f"/proc/{pid}/status").read_text()
         return int(re.search(r"VmRSS:\s+(\d+) kB", status).group(1)) / 1024
 
-    proc = subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(out), "--spp",
-                             "1000000000", "--width", "64", "--height", "64", "--threads", "2"],
-                            stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    time.sleep(3.0)
-    early = rss_mib(proc.pid)
-    time.sleep(6.0)
-    late = rss_mib(proc.pid)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
+    with _Tracer(_render_argv(scene, out, spp, "--width", "64", "--height", "64"), tty=True) as child:
+        started = child.wait_for_samples(2 * one_pass)
+        early = rss_mib(child.proc.pid)
+        child.wait_for_samples(started + 20_000_000)
+        late = rss_mib(child.proc.pid)
+        child.proc.send_signal(signal.SIGINT)
+        code, err = child.finish()
     assert late - early < 40.0, (early, late)
-    assert proc.returncode == 130, err
+    assert code == 130, err
     assert 0 < read_exr(out).spp < 1_000_000_000
 
 
