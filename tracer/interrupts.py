@@ -111,7 +111,8 @@ def deferred(note: str | None = None) -> Iterator[list[int]]:
 
     def record(signum, frame) -> None:
         if not arrived and note:
-            print(note, file=sys.stderr, flush=True)
+            sys.stderr.write(note + "\n")  # one write: a line of another thread cannot split it
+            sys.stderr.flush()
         arrived.append(signum)
 
     previous = {s: signal.getsignal(s) for s in SIGNALS}

@@ -214,8 +214,7 @@ class _ProgressLine:
         while True:
             elapsed = time.perf_counter() - self.start
             message = f"{self.text}: {elapsed:.0f} s"
-            print(("\r" + message) if self.tty else message, end="" if self.tty else "\n", file=sys.stderr,
-                  flush=True)
+            _say(("\r" + message) if self.tty else message + "\n")
             self.shown = True
             if self.done.wait(period):
                 return
@@ -227,7 +226,14 @@ class _ProgressLine:
         self.thread.join()
         if self.shown:
             message = f"{self.text}: done in {time.perf_counter() - self.start:.1f} s"
-            print(("\r" + message) if self.tty else message, file=sys.stderr, flush=True)
+            _say(("\r" + message if self.tty else message) + "\n")
+
+
+def _say(text: str) -> None:
+    """``text`` to stderr in one write: ``print`` writes a line's end apart from it, and a note
+    printed by another thread (an interrupt's) could land between the two."""
+    sys.stderr.write(text)
+    sys.stderr.flush()
 
 
 if __name__ == "__main__":
