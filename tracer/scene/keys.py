@@ -114,6 +114,8 @@ POINT_LIGHT = Section("[[lights]] type = \"point\"", "A point light: a delta lig
     Key("intensity", VEC3 + " >= 0, <= 1e18", REQUIRED, "radiant intensity, W/sr per channel"),
 ))
 
+# A shape's table before its type is read (the keys every type has).
+SHAPE = Section("[[shapes]]", "Keys of every shape.", _SHAPE_COMMON)
 SHAPES = {"quad": QUAD, "sphere": SPHERE, "mesh": MESH}
 # Every section, in the order the reference lists them.
 SECTIONS = (TOP, RENDER, CAMERA, MATERIAL, QUAD, SPHERE, MESH, POINT_LIGHT)

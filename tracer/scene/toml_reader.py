@@ -9,6 +9,7 @@ here.
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 import tomllib
@@ -22,6 +23,7 @@ from ..camera import Camera
 from ..errors import InputError
 from ..inputfiles import read_regular_file
 from ..record import MAX_SAMPLE_INDEX
+from . import keys
 from .icosphere import unit_icosphere
 from .mesh import Mesh, MeshError, angle_weighted_normals, read_mesh_file
 from .model import Scene, Shape
@@ -75,22 +77,22 @@ def scene_from_document(doc: Any, path: str, base: Path, width: int | None = Non
     """Validate a parsed scene document into a :class:`Scene`. ``path`` names it in messages,
     ``base`` is the folder mesh files are relative to; ``width``/``height`` override the
     camera's resolution."""
-    top = _Reader(path, "", doc)
-    render = _read_render(_Reader(path, "render", top.raw("render", {})))
-    camera = _read_camera(_Reader(path, "camera", top.raw("camera")), width, height)
+    top = _Reader(path, "", doc, keys.TOP)
+    render = _read_render(_Reader(path, "render", top.raw("render", {}), keys.RENDER))
+    camera = _read_camera(_Reader(path, "camera", top.raw("camera"), keys.CAMERA), width, height)
     table = _read_materials(path, top.raw("materials", {}))
     geometry = _Geometry()
     shapes = top.raw("shapes", [])
     if not isinstance(shapes, list):
         top.fail("expected an array of tables ([[shapes]])", "shapes")
     for i, shape_table in enumerate(shapes):
-        _read_shape(_Reader(path, f"shapes[{i}]", shape_table), base, table.names, geometry)
+        _read_shape(_Reader(path, f"shapes[{i}]", shape_table, keys.SHAPE), base, table.names, geometry)
     lights = top.raw("lights", [])
     if not isinstance(lights, list):
         top.fail("expected an array of tables ([[lights]])", "lights")
     point_position, point_intensity = [], []
     for i, light_table in enumerate(lights):
-        light = _Reader(path, f"lights[{i}]", light_table)
+        light = _Reader(path, f"lights[{i}]", light_table, keys.POINT_LIGHT)
         light.string("type", ("point",))
         point_position.append(_position(light, "position"))
         point_intensity.append(light.vec3("intensity", nonnegative=True, hi=MAX_RADIANCE))
@@ -136,13 +138,28 @@ class _Reader:
     that was never asked for, as Nori's factory and pbrt's ReportUnused do.
     """
 
-    def __init__(self, path: str, key: str, table: Any):
+    def __init__(self, path: str, key: str, table: Any, section: keys.Section | None = None,
+                 extra: tuple[str, ...] = ()):
         self.path = path
         self.key = key
         if not isinstance(table, dict):
             self.fail(f"expected a table, got {_kind(table)}")
         self.table = table
         self.used: set[str] = set()
+        self.declared: tuple[str, ...] = ()
+        self.expect(section, extra)
+
+    def expect(self, section: keys.Section | None, extra: tuple[str, ...] = ()) -> None:
+        """The keys this table may hold: ``section``'s (``tracer.scene.keys``) and ``extra``
+        (a material's parameters). A shape's section is known once its ``type`` is read."""
+        self.declared = (section.names() if section else ()) + tuple(extra)
+
+    def _unknown(self) -> list[str]:
+        return sorted(set(self.table) - set(self.declared))
+
+    def _close(self, name: str, candidates) -> str:
+        match = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
+        return f" (did you mean '{match[0]}'?)" if match else ""
 
     def _full(self, name: str) -> str:
         return f"{self.key}.{name}" if self.key else name
@@ -154,10 +171,19 @@ class _Reader:
         return name in self.table
 
     def raw(self, name: str, default: Any = ...) -> Any:
+        # The reader may only read what tracer.scene.keys declares: the reference page is made
+        # from those tables, so a key read here and not declared there would go undocumented.
+        if name not in self.declared:
+            raise RuntimeError(f"the scene reader reads {self._full(name)!r}, which tracer.scene.keys "
+                               f"does not declare")
         self.used.add(name)
         if name not in self.table:
             if default is ...:
-                self.fail("missing required key", name)
+                # A typo of a required key is missing under its own name and present, unknown,
+                # under another: name the one the file has.
+                typo = difflib.get_close_matches(name, self._unknown(), n=1, cutoff=0.6)
+                hint = f" (the table has '{typo[0]}', which is not a key: a typo?)" if typo else ""
+                self.fail("missing required key" + hint, name)
             return default
         return self.table[name]
 
@@ -220,7 +246,8 @@ class _Reader:
     def done(self) -> None:
         unknown = sorted(set(self.table) - self.used)
         if unknown:
-            self.fail(f"unknown key '{unknown[0]}'", unknown[0])
+            name = unknown[0]
+            self.fail(f"unknown key '{name}'{self._close(name, self.declared)}", name)
 
 
 def _kind(value: Any) -> str:
@@ -279,12 +306,13 @@ def _read_camera(r: _Reader, width: int | None, height: int | None) -> Camera:
 
 
 def _read_materials(path: str, table: Any) -> materials.MaterialTable:
-    top = _Reader(path, "materials", table)
+    top = _Reader(path, "materials", table, extra=tuple(table) if isinstance(table, dict) else ())
     triples = []
     sides: list[bool] = []
     for name in table:
-        m = _Reader(path, f"materials.{name}", top.raw(name))
+        m = _Reader(path, f"materials.{name}", top.raw(name), keys.MATERIAL)
         kind = materials.TYPES[m.string("type", tuple(materials.TYPES))]
+        m.expect(keys.MATERIAL, tuple(p.name for p in kind.params))
         values: dict[str, object] = {}
         for p in kind.params:
             default = ... if p.default is None else p.default
@@ -392,7 +420,8 @@ class _Geometry:
 
 
 def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Geometry) -> None:
-    shape_type = r.string("type", ("quad", "mesh", "sphere"))
+    shape_type = r.string("type", tuple(keys.SHAPES))
+    r.expect(keys.SHAPES[shape_type])
     # Radiance is kept at float32 precision, as the EXR output and the light sampler's table
     # store it, so that every table holds the very same emission.
     emission = r.vec3("emission", default=[0.0, 0.0, 0.0], nonnegative=True, hi=MAX_RADIANCE)

@@ -1,0 +1,62 @@
+"""The scene format's declared keys (tracer/scene/keys.py) and the reader agree: every declared
+key of every table is accepted, and a typo names the key the file has and the one it meant.
+The reader raising for keys it reads but which are not declared is exercised by every scene
+the suite loads. Not statistical."""
+
+import pytest
+
+from tracer import load_scene
+from tracer.errors import InputError
+from tracer.scene import keys
+
+CAMERA = {"origin": [0, 1, 4], "target": [0, 1, 0], "up": [0, 1, 0], "fov": 40, "width": 8, "height": 6,
+          "mirrored": False}
+
+
+def every_key_scene(tmp_path):
+    """A scene that gives every declared key of every table (a mesh file for the mesh keys)."""
+    mesh = tmp_path / "tri.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    common = {"material": "m", "emission": [0, 0, 0]}
+    return {
+        "render": {"spp": 4, "strategy": "mis", "light_sampling": "area", "sampler": "independent"},
+        "camera": CAMERA,
+        "materials": {"m": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5], "twosided": True}},
+        "shapes": [
+            {"type": "quad", "origin": [0, 0, 0], "edge1": [1, 0, 0], "edge2": [0, 0, -1], **common},
+            {"type": "sphere", "center": [0, 1, 0], "radius": 0.5, "subdivisions": 1, **common},
+            {"type": "mesh", "file": mesh.name, "normals": "vertex", **common},
+        ],
+        "lights": [{"type": "point", "position": [0, 2, 0], "intensity": [1, 1, 1]}],
+    }
+
+
+def test_every_declared_key_is_read(tmp_path):
+    doc = every_key_scene(tmp_path)
+    given = {"top level": set(doc), "[render]": set(doc["render"]), "[camera]": set(doc["camera"]),
+             "[materials.NAME]": {"type", "twosided"}}
+    for shape in doc["shapes"]:
+        given[f'[[shapes]] type = "{shape["type"]}"'] = set(shape)
+    given['[[lights]] type = "point"'] = set(doc["lights"][0])
+    for section in keys.SECTIONS:  # the scene above really gives every declared key
+        assert set(section.names()) == given[section.header], section.header
+    load_scene(doc, base_dir=tmp_path)
+
+
+@pytest.mark.parametrize("table, typo, meant, message", [
+    ("camera", "fov_y", "fov", "camera.fov: missing required key (the table has 'fov_y', which is not a key"),
+    ("camera", "widht", "width", "camera.widht: unknown key 'widht' (did you mean 'width'?)"),
+    ("material", "reflectanse", "reflectance",
+     "materials.m.reflectance: missing required key (the table has 'reflectanse'"),
+    ("material", "twosidded", "twosided",
+     "materials.m.twosidded: unknown key 'twosidded' (did you mean 'twosided'?)"),
+    ("shape", "radious", "radius", "shapes[0].radius: missing required key (the table has 'radious'"),
+])
+def test_a_typo_names_the_key_given_and_the_key_meant(table, typo, meant, message):
+    doc = {"camera": dict(CAMERA), "materials": {"m": {"type": "diffuse", "reflectance": [1, 1, 1]}},
+           "shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1.0}]}
+    where = {"camera": doc["camera"], "material": doc["materials"]["m"], "shape": doc["shapes"][0]}[table]
+    where[typo] = where.pop(meant, True)
+    with pytest.raises(InputError) as caught:
+        load_scene(doc)
+    assert message in str(caught.value)
