@@ -650,3 +650,27 @@ def test_a_mesh_or_include_that_is_not_a_regular_file_is_refused(tmp_path):
         with pytest.raises(InputError) as info:
             load_scene(path)
         assert words in str(info.value) and "\n" not in str(info.value), str(info.value)
+
+
+def test_baseline_scenes_are_resolved_as_every_command_resolves_them(tmp_path, monkeypatch):
+    """--create's --scenes and a baseline's entries take the names every command takes
+    (``tracer scenes``): a shipped TOML or Mitsuba scene is keyed by its name wherever the
+    baseline is (its reference by that name, "/" made "_"), a file by its path relative to the
+    baseline, which wins over a shipped scene's name; a name matching nothing lists the names."""
+    from tracer.scene import resolve_scene
+
+    folder = tmp_path / "project"
+    folder.mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert check.baseline_scene("cornell", folder) == ("cornell", resolve_scene("cornell"), "cornell")
+    key, file, name = check.baseline_scene("mitsuba/veach_mis.xml", folder)
+    assert (key, file.name, name) == ("mitsuba/veach_mis", "veach_mis.xml", "mitsuba_veach_mis")
+    assert check.scene_path(check.Entry(scene=key, strategy="mis", spp=1, seeds=[1]), folder) == file
+    (tmp_path / "cornell.toml").write_text(DIFFUSE_SCENE)  # the user's own, in the current folder
+    assert check.baseline_scene("cornell.toml", folder)[:1] == ("../cornell.toml",)
+    (folder / "cornell").write_text(DIFFUSE_SCENE)  # beside the baseline: an entry's file wins
+    own = check.scene_path(check.Entry(scene="cornell", strategy="mis", spp=1, seeds=[1]), folder)
+    assert own == folder / "cornell"
+    unknown = r"^--scenes: cornel: no such scene file, nor a shipped .*tiny_light"
+    with pytest.raises(InputError, match=unknown):
+        check.baseline_scene("cornel", folder)

@@ -236,6 +236,37 @@ def test_default_scene_renders_from_any_directory(tmp_path):
     assert (tmp_path / "veach_mis_mis.exr").is_file() and (tmp_path / "veach_mis_mis.png").is_file()
 
 
+def test_shipped_scenes_by_name_in_every_command(tmp_path, monkeypatch, capsys):
+    """`tracer render cornell` in a folder of one's own said "cornell: no such scene file": now
+    `tracer scenes` lists each shipped scene on one line (name and description), and render,
+    reference, compare and convert take those names (outputs named after the scene); a name
+    that matches nothing is exit 2 with one line listing the names."""
+    from tracer.scene import shipped_scenes
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["scenes"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    shipped = shipped_scenes()
+    assert len(lines) == len(shipped)
+    for line, s in zip(lines, shipped, strict=True):
+        assert line.split()[0] == s.name and line.endswith(s.description)
+    small = ["--width", "8", "--height", "8", "--quiet"]  # cornell is square
+    assert main(["render", "cornell", "--spp", "1", *small]) == 0
+    assert read_exr(tmp_path / "cornell_mis.exr").record.scene_digest == load_scene("cornell").digest
+    assert main(["reference", "cornell", "--spp", "8", *small]) == 0
+    assert (tmp_path / "cornell_reference.exr").is_file()
+    assert main(["compare", "cornell", "--reference", "cornell_reference.exr", "--strategies", "light",
+                 "--spp", "2", "--out", "cmp", "--quiet"]) == 0
+    assert (tmp_path / "cmp" / "index.html").is_file()
+    assert main(["convert", "cornell", "--quiet"]) == 0
+    assert load_scene(tmp_path / "cornell.toml").digest == load_scene("cornell").digest
+    capsys.readouterr()
+    assert main(["render", "cornel", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("tracer: error: cornel: no such scene file, nor a shipped")
+    assert "cornell, " in err[0] and "mitsuba/veach_mis" in err[0]
+
+
 @pytest.mark.parametrize("strategy", [Strategy("mis"), Strategy("light"),
                                       Strategy("mis", "balance", 2, 2, one_sample=True)])
 def test_same_seed_same_image_whatever_threads_and_batch_size(tmp_path, strategy):

@@ -86,7 +86,7 @@ from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
 from ..inputfiles import read_regular_file
 from ..render_loop import RenderResult, RenderSettings, render_complete
 from ..sampler_choice import DEFAULT_SAMPLER, SAMPLERS, replicates_of
-from ..scene import Scene, default_scene_path, load_scene
+from ..scene import Scene, load_scene, resolve_scene, shipped_scenes
 from ..strategy import (
     DEFAULT_LIGHT_SAMPLING,
     HEURISTICS,
@@ -405,10 +405,13 @@ def check_seeds(entries: list[Entry], where: str) -> None:
 
 
 def scene_path(entry: Entry, base: Path) -> Path:
-    """A shipped scene by name (beside the default scene), else a path relative to the baseline
-    file's folder."""
-    shipped = default_scene_path().parent / f"{entry.scene}.toml"
-    return shipped if shipped.is_file() else base / entry.scene
+    """The entry's scene: a file relative to the baseline file's folder if there is one, else a
+    shipped scene by name (``tracer.scene.shipped``, the resolver of every command: a file wins
+    over a name), else InputError listing the shipped names."""
+    beside = base / entry.scene
+    if os.path.lexists(beside) and not beside.is_dir():
+        return beside
+    return resolve_scene(entry.scene)
 
 
 def downsampled_reference(reference: Film, factor: int, half: bool) -> tuple[np.ndarray, ...]:
@@ -850,20 +853,10 @@ def create_baseline(
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise InputError("the baseline's folder does not exist", str(folder))
-    shipped_dir = default_scene_path().parent
     prepared = []  # (scene key, scene file, reference key)
     used_names: set[str] = set()
     for text in scenes:
-        text = text.strip()
-        if Path(text).is_file():
-            file = Path(text)
-            rel = os.path.relpath(file.resolve(), folder.resolve())
-            key = rel if not os.path.isabs(rel) else str(file.resolve())
-            name = file.name
-        elif (shipped_dir / f"{text}.toml").is_file():
-            file, key, name = shipped_dir / f"{text}.toml", text, text
-        else:
-            raise InputError("no such scene file (nor a shipped scene's name)", text[:300], "--scenes")
+        key, file, name = baseline_scene(text.strip(), folder)
         if key in (k for k, _, _ in prepared):
             continue
         unique, i = name, 2
@@ -893,6 +886,25 @@ def create_baseline(
     _measure_all(entries, folder, 0, threads, stream, result, client)
     _write_update(path, entries, result, stream)
     return result
+
+
+def baseline_scene(text: str, folder: Path) -> tuple[str, Path, str]:
+    """A ``--scenes`` item as (the entry's ``scene`` key, the scene file, the name of its
+    reference file): a scene file is keyed by its path relative to the baseline's ``folder``
+    (absolute if there is none) and its reference by its file name; a shipped scene by its name
+    (``tracer.scene.shipped``), wherever the baseline is, and its reference by that name with
+    "_" for "/" (``mitsuba/veach_mis``: ``mitsuba_veach_mis``). InputError for neither."""
+    try:
+        file = resolve_scene(text)
+    except InputError as exc:
+        raise InputError(str(exc), "--scenes") from None
+    shipped = {s.path.resolve(): s.name for s in shipped_scenes()}
+    if Path(text).exists() or file.resolve() not in shipped:
+        rel = os.path.relpath(file.resolve(), folder.resolve())
+        return (rel if not os.path.isabs(rel) else str(file.resolve())), file, file.name
+    name = shipped[file.resolve()]
+    # references/NAME.exr, as Entry.reference_key names a shipped scene's reference by default.
+    return name, file, name.replace("/", "_")
 
 
 def make_reference(scene_file: Path, ref_path: Path, size: int, spp: int, threads: int, stream) -> None:
