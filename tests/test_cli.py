@@ -267,6 +267,39 @@ def test_shipped_scenes_by_name_in_every_command(tmp_path, monkeypatch, capsys):
     assert "cornell, " in err[0] and "mitsuba/veach_mis" in err[0]
 
 
+def test_render_never_replaces_an_existing_output_unless_forced(tmp_path, monkeypatch, capsys):
+    """The Mitsuba veach_mis silently replaced the quick start's veach_mis_mis.exr (both scenes
+    are named veach_mis). Now a render onto an existing EXR, or onto a file where its PNG
+    preview goes, is exit 2 with one line naming the file and the ways on (--force, -o), before
+    any rendering, and leaves both files as they were; --force replaces them and -o writes
+    elsewhere. A fresh folder's plain `tracer render` (the quick start) is not affected."""
+    import os
+
+    monkeypatch.chdir(tmp_path)
+    small = ["--spp", "1", "--width", "8", "--height", "6", "--quiet"]
+    assert main(["render", *small]) == 0
+    exr, png = tmp_path / "veach_mis_mis.exr", tmp_path / "veach_mis_mis.png"
+    before = {p: (p.read_bytes(), os.stat(p).st_mtime_ns) for p in (exr, png)}
+    capsys.readouterr()
+    for argv in (["render", "mitsuba/veach_mis", *small], ["render", "veach_mis", "--seed", "0", *small]):
+        assert main(argv) == 2
+        errors = [line for line in capsys.readouterr().err.splitlines() if "note:" not in line]
+        assert errors == [f"tracer: error: {exr.name}: a render exists here: --force replaces it, or -o "
+                          "OUT.exr writes another file"], errors
+    assert {p: (p.read_bytes(), os.stat(p).st_mtime_ns) for p in (exr, png)} == before
+    assert main(["render", "mitsuba/veach_mis", "-o", "xml.exr", *small]) == 0
+    assert read_exr(tmp_path / "xml.exr").record.scene_digest == load_scene("mitsuba/veach_mis").digest
+    assert main(["render", "mitsuba/veach_mis", "--force", *small]) == 0
+    assert read_exr(exr).record.scene_digest == load_scene("mitsuba/veach_mis").digest
+    exr.unlink()  # a preview left alone is still somebody's image
+    capsys.readouterr()
+    assert main(["render", "veach_mis", *small]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"tracer: error: {png.name}: a file exists where this render's PNG preview goes: "
+                   "--force replaces it, or -o OUT.exr writes another file"], err
+    assert not exr.exists()
+
+
 @pytest.mark.parametrize("strategy", [Strategy("mis"), Strategy("light"),
                                       Strategy("mis", "balance", 2, 2, one_sample=True)])
 def test_same_seed_same_image_whatever_threads_and_batch_size(tmp_path, strategy):
@@ -301,14 +334,15 @@ def test_resumed_samples_are_fresh(tmp_path):
     assert a.spp == 8 and isinstance(a, Film)
 
 
-def _start_render(scene, out, spp: int, env=None):
+def _start_render(scene, out, spp: int, env=None, *options: str):
     """A ``tracer render`` subprocess with SIGINT at its default (a non-interactive shell may
     start us with SIGINT ignored; Python then keeps it ignored)."""
     import signal
 
     return subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(out),
-                             "--spp", str(spp), "--threads", "2"], stderr=subprocess.PIPE, text=True,
-                            env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                             "--spp", str(spp), "--threads", "2", *options], stderr=subprocess.PIPE,
+                            text=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 @pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
@@ -358,7 +392,7 @@ def test_interrupt_while_compiling_leaves_files_alone(tmp_path):
     out = tmp_path / "r.exr"
     out.write_bytes(b"an earlier render")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    proc = _start_render(scene, out, 4, env=env)
+    proc = _start_render(scene, out, 4, env, "--force")  # without it the render would not start
     time.sleep(3.0)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
@@ -538,7 +572,7 @@ def test_a_billion_spp_render_has_flat_memory_and_stops_on_ctrl_c(tmp_path):
         return int(re.search(r"VmRSS:\s+(\d+) kB", status).group(1)) / 1024
 
     proc = subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(out), "--spp",
-                             "1000000000", "--width", "64", "--height", "64", "--threads", "2"],
+                             "1000000000", "--width", "64", "--height", "64", "--threads", "2", "--force"],
                             stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(3.0)

@@ -117,6 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "scenes lists them; default: veach_mis)")
     r.add_argument("-o", "--output", help="output EXR path (default: SCENE_STRATEGY.exr here); "
                    "the PNG preview goes beside it")
+    r.add_argument("--force", action="store_true", help="replace an existing OUTPUT and its PNG preview "
+                   "(without it, a render never writes over an existing file)")
     r.add_argument("--spp", type=_spp, help="samples per pixel (default: the scene's, else 64)")
     r.add_argument("--strategy", choices=STRATEGIES,
                    help="sampling strategy (default: the scene's, else mis)")
@@ -640,6 +642,20 @@ def _warn_if_dark(scene) -> None:
               "will be black", file=sys.stderr)
 
 
+def _refuse_existing_render(output: Path) -> None:
+    """InputError before any rendering if the EXR or its PNG preview exists: a render never
+    replaces what an earlier one computed unless asked (--force), as ``tracer reference`` does.
+    Renders of two scenes with the same name (veach_mis.toml and mitsuba/veach_mis.xml) get the
+    same default name; this is what stops the second from silently replacing the first."""
+    exr, png = output, output.with_suffix(".png")
+    if os.path.lexists(exr):
+        raise InputError("a render exists here: --force replaces it, or -o OUT.exr writes another file",
+                         str(exr))
+    if os.path.lexists(png):
+        raise InputError("a file exists where this render's PNG preview goes: --force replaces it, or "
+                         "-o OUT.exr writes another file", str(png))
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from . import scene as scene_mod
     from .render_loop import RenderSettings, render
@@ -656,6 +672,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     seed_part = f"_seed{args.seed}" if args.seed else ""
     sampler_part = f"_{sampler}" if sampler != DEFAULT_SAMPLER else ""
     output = _exr_path(args.output or f"{scene.name}_{strategy.slug}{sampler_part}{seed_part}.exr")
+    if not args.force:
+        _refuse_existing_render(output)
     _warn_if_dark(scene)
     settings = RenderSettings(spp=spp, seed=args.seed, threads=args.threads, sampler=sampler)
     result = render(scene, strategy, settings, progress=not args.quiet)
