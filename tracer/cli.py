@@ -203,8 +203,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "reference (t-test) and refuses entries too heavy-tailed for that, naming the spp "
                         "they need.")
     ch.add_argument("--baseline", default=None,
-                    help="baseline JSON (default: ./tracer_baseline.json if present, else the source "
-                    "checkout's renders/noise_baseline.json)")
+                    help="baseline JSON (default: ./tracer_baseline.json if present, else the shipped "
+                    "scenes' renders/noise_baseline.json of the source checkout tracer runs from, or else of "
+                    "the one the current folder is in; the command says which it used)")
     ch.add_argument("--update", action="store_true",
                     help="re-measure the baseline's entries and rewrite it (refuses entries too heavy-tailed "
                     "to test)")
@@ -229,7 +230,8 @@ def build_parser() -> argparse.ArgumentParser:
     ch.add_argument("--sampler", choices=SAMPLERS, default=None, metavar="NAME",
                     help=f"with --create: the sampler of every entry, one of %(choices)s "
                     f"(default {DEFAULT_SAMPLER})")
-    ch.add_argument("--out", default="check_failures", help="where the maps of failing entries go")
+    ch.add_argument("--out", default="check_failures", help="where the maps of failing entries go, a "
+                    "folder per entry named SCENE_STRATEGY (default check_failures)")
     ch.add_argument("--seed-offset", type=_seed, default=0,
                     help="add this to every seed (other random numbers, same statistics)")
     ch.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
@@ -950,7 +952,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def _check(args: argparse.Namespace, client) -> int:
-    from .study.check import create_baseline, default_baseline, format_table, parse_strategies, run_check
+    from .study.check import create_baseline, find_default_baseline, format_table, parse_strategies, run_check
 
     create_options = {"--scenes": args.scenes, "--strategies": args.strategies, "--spp": args.spp,
                       "--seeds": args.seeds, "--reference-spp": args.reference_spp, "--size": args.size,
@@ -976,9 +978,14 @@ def _check(args: argparse.Namespace, client) -> int:
         print(f"baseline written: {args.create} ({len(result.measurements)} entries); check with "
               f"tracer check --baseline {args.create}", file=sys.stderr)
         return 0
-    baseline = Path(args.baseline) if args.baseline else default_baseline()
-    if not args.baseline:
-        print(f"baseline: {baseline}", file=sys.stderr)
+    if args.baseline:
+        baseline = Path(args.baseline)
+    else:
+        # Said first: the default depends on the current folder and on how tracer was installed.
+        # (A baseline given with --baseline is not repeated here, so that bad input stays one
+        # line; the last line names the baseline either way.)
+        baseline, why = find_default_baseline()
+        print(f"baseline: {baseline} ({why})", file=sys.stderr)
     result = run_check(baseline, update=args.update, out=_output_folder(args.out),
                        seed_offset=args.seed_offset, threads=args.threads, client=client)
     if args.update:
@@ -986,10 +993,11 @@ def _check(args: argparse.Namespace, client) -> int:
         return 0
     print(format_table(result.verdicts))
     if result.ok:
-        print(f"check passed: {len(result.measurements)} entries", file=sys.stderr)
+        print(f"check passed: {len(result.measurements)} entries of {baseline}", file=sys.stderr)
         return 0
     failing = sorted({v.entry for v in result.verdicts if not v.ok})
-    print(f"check FAILED: {', '.join(failing)}; maps in {args.out}/", file=sys.stderr)
+    folders = ", ".join(f"{folder}/" for folder in result.failure_folders.values())
+    print(f"check FAILED: {', '.join(failing)} (baseline {baseline}); maps in {folders}", file=sys.stderr)
     return EXIT_CHECK_FAILED
 
 
