@@ -907,7 +907,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     # The report is many files; a signal while they are written is held until all are.
     with interrupts.deferred() as arrived:
         document = report.make_report(out, scene.name, args.reference, reference, runs, mode, sweep,
-                                      allocation, args.crop, args.exposure, args.target, tuple(formats))
+                                      allocation, args.crop, args.exposure, args.target, tuple(formats),
+                                      say=None if args.quiet else lambda text: print(text, file=sys.stderr))
     if not args.quiet:
         width = max(len(r["name"]) for r in document["results"])
         seconds = "CPU s" if args.clock == "cpu" else "seconds"
