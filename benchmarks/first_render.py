@@ -124,7 +124,7 @@ def run(arguments: list[str], cache: Path, out: Path) -> float:
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # a user's Python keeps its bytecode
     start = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "tracer", "render", *arguments, "--out", str(out),
-                           "--quiet"],
+                           "--quiet", "--force"],
                           cwd=ROOT, env=env, capture_output=True, text=True)
     seconds = time.perf_counter() - start
     if done.returncode != 0:

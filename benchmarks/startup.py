@@ -73,7 +73,7 @@ def run_command(scene: str, out: str) -> tuple[float, float]:
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     subprocess.run([sys.executable, "-m", "tracer", "render", scene, "--width", "32", "--height", "32",
-                    "--spp", "1", "--quiet", "-o", out], check=True)
+                    "--spp", "1", "--quiet", "-o", out, "--force"], check=True)
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -83,7 +83,7 @@ def import_times(scene: str, out: str) -> dict[str, float]:
     """Cumulative import seconds of the heavy top-level packages and of tracer's own modules
     (tracer's figures exclude the heavy packages they import)."""
     done = subprocess.run([sys.executable, "-X", "importtime", "-m", "tracer", "render", scene, "--width",
-                           "32", "--height", "32", "--spp", "1", "--quiet", "-o", out],
+                           "32", "--height", "32", "--spp", "1", "--quiet", "-o", out, "--force"],
                           capture_output=True, text=True, check=True)
     totals: dict[str, float] = {}
     for line in done.stderr.splitlines():

@@ -70,6 +70,7 @@ def test_halved_baseline_noise_fails_with_table_and_maps(baseline_copy, tmp_path
     assert "FAIL" in table and "ratio" in table
     for file in ("image.exr", "reference.exr", "error.png", "pvalue.png"):
         assert (out / "cornell_light" / file).is_file(), file
+    assert result.failure_folders == {"cornell/light": out / "cornell_light"}
 
 
 def _patch_estimator(monkeypatch, change):
@@ -147,8 +148,11 @@ def test_update_and_command_line(baseline_copy, tmp_path, capsys):
     assert all(e.relmse > 0 and len(e.relmse_seeds) == len(e.seeds) and e.variance > 0 for e in entries)
     capsys.readouterr()
     assert main(["check", "--baseline", str(baseline_copy), "--out", str(tmp_path / "f")]) == 0
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     assert "point_light/light" in out and "relmse" in out and "FAIL" not in out
+    # The last line says which baseline was used (a default one is also said first).
+    lines = err.strip().splitlines()
+    assert lines[-1] == f"check passed: {len(entries)} entries of {baseline_copy}", lines
 
     bad = copy.deepcopy(doc)
     bad["entries"][0]["strategy"] = "fast"
@@ -258,6 +262,52 @@ def test_hostile_baseline_text_is_one_line(content, words, tmp_path, capsys):
 
 # ---------------------------------------------------------------------------------------------
 # Where the baseline is, and baselines for one's own scenes (--create)
+
+
+def test_failure_maps_go_to_visible_unique_folders_named_by_scene_and_strategy():
+    """A failing entry's maps went to a folder named after the entry with "/" made "_": for a
+    scene ../room.toml that was ".._room.toml_mis-power", hidden by its leading dots. Now the
+    folder is the scene's stem and the strategy's slug, as tracer render names its outputs, in
+    safe characters, never with a leading dot, and unique over the baseline."""
+    entries = [check.Entry(scene="../room.toml", strategy="mis", spp=1, seeds=[1]),
+               check.Entry(scene="../other/room.toml", strategy="mis", spp=1, seeds=[1]),
+               check.Entry(scene="cornell", strategy="light", spp=1, seeds=[1], sampler="sobol"),
+               check.Entry(scene="mitsuba/veach_mis", strategy="mis", heuristic="balance", spp=1, seeds=[1]),
+               check.Entry(scene="/abs/.hidden scene;$x.toml", strategy="bsdf", spp=1, seeds=[1])]
+    names = check.failure_folder_names(entries)
+    assert list(names.values()) == ["room_mis", "room_mis-2", "cornell_light_sobol",
+                                    "mitsuba_veach_mis_mis_balance", "hidden_scene_x_bsdf"]
+    assert list(names) == [e.name for e in entries]
+
+
+def test_the_default_baseline_is_found_in_a_clone_installed_with_pip_install(tmp_path, monkeypatch, capsys):
+    """The quick start installs a clone with a plain `pip install .`: the package then runs from
+    site-packages, away from the clone's renders/noise_baseline.json, and `tracer check` in the
+    clone said there was no baseline. Now the clone the current folder is in (its pyproject.toml
+    names the project tracer) gives it, from any folder inside the clone; another project's
+    folder does not; and the command says which baseline it uses and why."""
+    monkeypatch.setattr(check, "repository_baseline", lambda: None)  # as a pip install . does
+    clone = tmp_path / "clone"
+    (clone / "renders").mkdir(parents=True)
+    (clone / "pyproject.toml").write_text('[project]\nname = "tracer"\nversion = "0.9.0"\n')
+    (clone / "renders" / "noise_baseline.json").write_text('{"entries": []}')
+    (clone / "tests" / "data").mkdir(parents=True)
+    for folder in (clone, clone / "tests" / "data"):
+        monkeypatch.chdir(folder)
+        path, why = check.find_default_baseline()
+        assert path == clone.resolve() / "renders" / "noise_baseline.json" and "current folder is in" in why
+    other = tmp_path / "other"
+    (other / "renders").mkdir(parents=True)
+    (other / "pyproject.toml").write_text('[project]\nname = "not-tracer"\n')
+    (other / "renders" / "noise_baseline.json").write_text('{"entries": []}')
+    monkeypatch.chdir(other)
+    with pytest.raises(InputError, match="not run from or in a source checkout"):
+        check.find_default_baseline()
+    monkeypatch.chdir(clone)
+    assert main(["check"]) == 0  # an empty baseline: nothing to render
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[0] == (f"baseline: {clone.resolve()}/renders/noise_baseline.json (the shipped scenes' "
+                      "baseline of the source checkout the current folder is in)"), err
 
 
 def test_default_baseline_outside_the_repository(tmp_path, monkeypatch, capsys):
@@ -650,3 +700,27 @@ def test_a_mesh_or_include_that_is_not_a_regular_file_is_refused(tmp_path):
         with pytest.raises(InputError) as info:
             load_scene(path)
         assert words in str(info.value) and "\n" not in str(info.value), str(info.value)
+
+
+def test_baseline_scenes_are_resolved_as_every_command_resolves_them(tmp_path, monkeypatch):
+    """--create's --scenes and a baseline's entries take the names every command takes
+    (``tracer scenes``): a shipped TOML or Mitsuba scene is keyed by its name wherever the
+    baseline is (its reference by that name, "/" made "_"), a file by its path relative to the
+    baseline, which wins over a shipped scene's name; a name matching nothing lists the names."""
+    from tracer.scene import resolve_scene
+
+    folder = tmp_path / "project"
+    folder.mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert check.baseline_scene("cornell", folder) == ("cornell", resolve_scene("cornell"), "cornell")
+    key, file, name = check.baseline_scene("mitsuba/veach_mis.xml", folder)
+    assert (key, file.name, name) == ("mitsuba/veach_mis", "veach_mis.xml", "mitsuba_veach_mis")
+    assert check.scene_path(check.Entry(scene=key, strategy="mis", spp=1, seeds=[1]), folder) == file
+    (tmp_path / "cornell.toml").write_text(DIFFUSE_SCENE)  # the user's own, in the current folder
+    assert check.baseline_scene("cornell.toml", folder)[:1] == ("../cornell.toml",)
+    (folder / "cornell").write_text(DIFFUSE_SCENE)  # beside the baseline: an entry's file wins
+    own = check.scene_path(check.Entry(scene="cornell", strategy="mis", spp=1, seeds=[1]), folder)
+    assert own == folder / "cornell"
+    unknown = r"^--scenes: cornel: no such scene file, nor a shipped .*tiny_light"
+    with pytest.raises(InputError, match=unknown):
+        check.baseline_scene("cornel", folder)

@@ -242,6 +242,70 @@ def test_default_scene_renders_from_any_directory(tmp_path):
     assert (tmp_path / "veach_mis_mis.exr").is_file() and (tmp_path / "veach_mis_mis.png").is_file()
 
 
+def test_shipped_scenes_by_name_in_every_command(tmp_path, monkeypatch, capsys):
+    """`tracer render cornell` in a folder of one's own said "cornell: no such scene file": now
+    `tracer scenes` lists each shipped scene on one line (name and description), and render,
+    reference, compare and convert take those names (outputs named after the scene); a name
+    that matches nothing is exit 2 with one line listing the names."""
+    from tracer.scene import shipped_scenes
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["scenes"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    shipped = shipped_scenes()
+    assert len(lines) == len(shipped)
+    for line, s in zip(lines, shipped, strict=True):
+        assert line.split()[0] == s.name and line.endswith(s.description)
+    small = ["--width", "8", "--height", "8", "--quiet"]  # cornell is square
+    assert main(["render", "cornell", "--spp", "1", *small]) == 0
+    assert read_exr(tmp_path / "cornell_mis.exr").record.scene_digest == load_scene("cornell").digest
+    assert main(["reference", "cornell", "--spp", "8", *small]) == 0
+    assert (tmp_path / "cornell_reference.exr").is_file()
+    assert main(["compare", "cornell", "--reference", "cornell_reference.exr", "--strategies", "light",
+                 "--spp", "2", "--out", "cmp", "--quiet"]) == 0
+    assert (tmp_path / "cmp" / "index.html").is_file()
+    assert main(["convert", "cornell", "--quiet"]) == 0
+    assert load_scene(tmp_path / "cornell.toml").digest == load_scene("cornell").digest
+    capsys.readouterr()
+    assert main(["render", "cornel", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("tracer: error: cornel: no such scene file, nor a shipped")
+    assert "cornell, " in err[0] and "mitsuba/veach_mis" in err[0]
+
+
+def test_render_never_replaces_an_existing_output_unless_forced(tmp_path, monkeypatch, capsys):
+    """The Mitsuba veach_mis silently replaced the quick start's veach_mis_mis.exr (both scenes
+    are named veach_mis). Now a render onto an existing EXR, or onto a file where its PNG
+    preview goes, is exit 2 with one line naming the file and the ways on (--force, -o), before
+    any rendering, and leaves both files as they were; --force replaces them and -o writes
+    elsewhere. A fresh folder's plain `tracer render` (the quick start) is not affected."""
+    import os
+
+    monkeypatch.chdir(tmp_path)
+    small = ["--spp", "1", "--width", "8", "--height", "6", "--quiet"]
+    assert main(["render", *small]) == 0
+    exr, png = tmp_path / "veach_mis_mis.exr", tmp_path / "veach_mis_mis.png"
+    before = {p: (p.read_bytes(), os.stat(p).st_mtime_ns) for p in (exr, png)}
+    capsys.readouterr()
+    for argv in (["render", "mitsuba/veach_mis", *small], ["render", "veach_mis", "--seed", "0", *small]):
+        assert main(argv) == 2
+        errors = [line for line in capsys.readouterr().err.splitlines() if "note:" not in line]
+        assert errors == [f"tracer: error: {exr.name}: a render exists here: --force replaces it, or -o "
+                          "OUT.exr writes another file"], errors
+    assert {p: (p.read_bytes(), os.stat(p).st_mtime_ns) for p in (exr, png)} == before
+    assert main(["render", "mitsuba/veach_mis", "-o", "xml.exr", *small]) == 0
+    assert read_exr(tmp_path / "xml.exr").record.scene_digest == load_scene("mitsuba/veach_mis").digest
+    assert main(["render", "mitsuba/veach_mis", "--force", *small]) == 0
+    assert read_exr(exr).record.scene_digest == load_scene("mitsuba/veach_mis").digest
+    exr.unlink()  # a preview left alone is still somebody's image
+    capsys.readouterr()
+    assert main(["render", "veach_mis", *small]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"tracer: error: {png.name}: a file exists where this render's PNG preview goes: "
+                   "--force replaces it, or -o OUT.exr writes another file"], err
+    assert not exr.exists()
+
+
 @pytest.mark.parametrize("strategy", [Strategy("mis"), Strategy("light"),
                                       Strategy("mis", "balance", 2, 2, one_sample=True)])
 def test_same_seed_same_image_whatever_threads_and_batch_size(tmp_path, strategy):
@@ -467,7 +531,7 @@ def test_interrupt_while_compiling_leaves_files_alone(tmp_path):
     compiling = "tracer: compiling the kernels"
     # The compile line's messages: "...: 1 s", ..., "...: done in 52.6 s".
     progress = re.compile(re.escape(compiling) + r".*?: (?:\d+ s|done in \d+\.\d s)")
-    with _Tracer(_render_argv(scene, out, 4), env=env) as child:
+    with _Tracer(_render_argv(scene, out, 4, "--force"), env=env) as child:  # --force: out exists
         # The whole line: print() writes its newline apart, and a note printed from another
         # thread (as the signal's is) can land between the two.
         child.wait_for(lambda text: re.search(progress.pattern + "\n", text), "compile line")

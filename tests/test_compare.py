@@ -733,3 +733,50 @@ def test_compare_takes_heuristics_and_allocations(tmp_path):
     assert not (out / "mis_allocation.png").exists()
     assert main(["compare", scene, "--reference", str(ref), "--spp", "2", "--out", str(out), "--quiet",
                  "--strategies", "ris", "--ris-sources", "light+bsdf", "--heuristic", "optimal"]) == 2
+
+
+def test_compare_says_each_stage_of_the_sweep_and_the_report(tmp_path, capsys):
+    """The sweep and the report (its maps at 300 dpi) were silent for most of a run: each
+    sweep line came only after every sweep was done, and nothing was said while the report
+    was written. Now the sweep says its start and each strategy as it is done, and the report
+    each stage as it starts, in order; --quiet says none of it."""
+    scene = str(SCENES / "cornell.toml")
+    ref = tmp_path / "ref.exr"
+    assert main(["reference", scene, "-o", str(ref), "--width", "12", "--spp", "16", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["compare", scene, "--reference", str(ref), "--strategies", "light,mis", "--spp", "2",
+                 "--sweep", "--sweep-seeds", "2", "--out", str(tmp_path / "cmp")]) == 0
+    lines = [line.strip() for line in capsys.readouterr().err.splitlines()]
+    stages = ["sweep: relMSE at spp 1, 2, 4, ... of 2 methods x 2 seeds", "sweep light:", "sweep mis",
+              "report 1/2: light: EXR, PNG, error and FLIP maps",
+              "report 2/2: mis: EXR, PNG, error and FLIP maps",
+              "report: 1 efficiency-ratio map", "report: the viewer's data", "report: convergence chart",
+              "report: allocation chart", "report: tables and index.html", "-> "]
+    found = [next(i for i, line in enumerate(lines) if line.startswith(stage)) for stage in stages]
+    assert found == sorted(found), lines
+    assert main(["compare", scene, "--reference", str(ref), "--strategies", "light", "--spp", "2",
+                 "--sweep", "--sweep-seeds", "2", "--out", str(tmp_path / "quiet"), "--quiet"]) == 0
+    assert "report" not in capsys.readouterr().err
+
+
+def test_report_maps_are_laid_out_as_tight_layout_and_drawn_once():
+    """Figure.tight_layout leaves a placeholder layout engine, and savefig then draws the figure
+    twice at 300 dpi (a map's image resampled twice); report.tight_layout lays it out the
+    same way (the same subplot parameters) and leaves no engine, so savefig draws it once."""
+    from tracer.study import report
+
+    plt = report._pyplot()
+    figures = []
+    for _ in range(2):
+        fig, ax = plt.subplots(figsize=(4.6, 3.8))
+        im = ax.imshow(np.arange(12.0).reshape(3, 4))
+        ax.set_title("a title", fontsize=9)
+        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="a label")
+        figures.append(fig)
+    figures[0].tight_layout()
+    report.tight_layout(figures[1])
+    params = [vars(f.subplotpars) for f in figures]
+    assert params[0] == params[1]
+    assert figures[0].get_layout_engine() is not None and figures[1].get_layout_engine() is None
+    for fig in figures:
+        plt.close(fig)

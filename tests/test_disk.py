@@ -104,7 +104,8 @@ def test_injected_write_failure_keeps_old_files(target, tmp_path, monkeypatch, c
         assert str(info.value).startswith(str(tmp_path / "notes.txt")) and "No space left" in str(info.value)
         assert not (tmp_path / "notes.txt").exists()
     else:
-        assert main(["render", str(scene), "-o", str(out), "--spp", "2", "--seed", "5", "--quiet"]) == 2
+        assert main(["render", str(scene), "-o", str(out), "--spp", "2", "--seed", "5", "--quiet",
+                     "--force"]) == 2
         line = _one_error_line(capsys.readouterr().err)
         failed = out.with_suffix(f".{target}")
         assert line.startswith(f"tracer: error: {failed}: cannot write: ") and "No space left" in line, line

@@ -155,3 +155,31 @@ def test_a_huge_echoed_name_gives_a_short_error_line(tmp_path):
         load_scene(scene)
     text = str(info.value)
     assert len(text) <= MAX_MESSAGE + 100 and "\n" not in text and "characters" in text, text[:300]
+
+
+def test_shipped_scenes_load_by_name_from_any_folder(tmp_path, monkeypatch):
+    """A newcomer's `load_scene("cornell")` from a folder of their own: every shipped scene
+    loads by its name (the TOML stem, or mitsuba/ and the XML stem), with or without its
+    suffix, and has a one-line description. A file of that name in the current folder wins
+    over the shipped scene; a name matching nothing is one line naming it and listing the
+    shipped names."""
+    from tracer.errors import InputError
+    from tracer.scene import resolve_scene, shipped_scenes
+
+    monkeypatch.chdir(tmp_path)
+    shipped = shipped_scenes()
+    names = [s.name for s in shipped]
+    assert names[:len(AGREE)] == sorted(AGREE) and "mitsuba/veach_mis" in names
+    for s in shipped:
+        assert resolve_scene(s.name) == s.path == resolve_scene(s.name + s.path.suffix)
+        assert s.description and "\n" not in s.description and len(s.description) <= 100, s
+    assert load_scene("cornell", 8, 8).digest == load_scene(SCENES / "cornell.toml", 8, 8).digest
+    assert load_scene("mitsuba/veach_mis", 8, 6).name == "veach_mis"
+    # The user's own file named cornell (TOML without a suffix) is theirs, not the shipped one.
+    (tmp_path / "cornell").write_text('[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 40\n')
+    assert load_scene("cornell").shapes == []
+    with pytest.raises(InputError) as info:
+        load_scene("cornel")
+    text = str(info.value)
+    assert text.startswith("cornel: no such scene file, nor a shipped scene's name") and "\n" not in text
+    assert all(name in text for name in names)

@@ -1,7 +1,7 @@
 """The Python API: load a scene, render it with a strategy, get arrays back, measure the error.
 
     import tracer
-    scene = tracer.load_scene("scenes/cornell.toml", width=64, height=64)
+    scene = tracer.load_scene("cornell", width=64, height=64)   # a shipped scene, by name
     image = tracer.render(scene, strategy="mis", spp=16, seed=1)
     image.mean.shape        # (64, 64, 3) float64 pixel values (linear RGB radiance)
     image.variance_of_mean  # (64, 64, 3) their estimated variance

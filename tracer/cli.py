@@ -29,6 +29,9 @@ def _sampler_names():
 # (``plugins.Names``): building the parser imports no plug-in and no numba.
 SAMPLERS = Names(_sampler_names)
 
+# Every command that takes a scene resolves it with tracer.scene.resolve_scene.
+SCENE_HELP = "scene file, or the name of a scene shipped with tracer (tracer scenes lists them)"
+
 EXIT_CHECK_FAILED = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
@@ -110,9 +113,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("render", help="render a scene file to EXR (with variance) and PNG",
                        description="Render a scene to an EXR with per-pixel variance and a PNG preview.")
-    r.add_argument("scene", nargs="?", help="scene file (default: the veach_mis scene shipped with tracer)")
+    r.add_argument("scene", nargs="?", help="scene file, or the name of a scene shipped with tracer (tracer "
+                   "scenes lists them; default: veach_mis)")
     r.add_argument("-o", "--output", help="output EXR path (default: SCENE_STRATEGY.exr here); "
                    "the PNG preview goes beside it")
+    r.add_argument("--force", action="store_true", help="replace an existing OUTPUT and its PNG preview "
+                   "(without it, a render never writes over an existing file)")
     r.add_argument("--spp", type=_spp, help="samples per pixel (default: the scene's, else 64)")
     r.add_argument("--strategy", choices=STRATEGIES,
                    help="sampling strategy (default: the scene's, else mis)")
@@ -124,7 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     ref = sub.add_parser("reference", help="render or grow a high-spp MIS reference",
                          description="Render a high-spp MIS reference (half-float EXR), or add samples "
                          "to an existing one with --resume.")
-    ref.add_argument("scene", help="scene file")
+    ref.add_argument("scene", help=SCENE_HELP)
     ref.add_argument("-o", "--output", help="reference EXR (default: SCENE_reference.exr here)")
     ref.add_argument("--spp", type=_spp, default=1024,
                      help="samples per pixel to add (default 1024)")
@@ -147,7 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "with a reference: EXR/PNG per strategy, error and FLIP maps, a labelled grid, "
                        "efficiency-ratio maps, metrics.json/csv and index.html, whose interactive viewer "
                        "(it opens from disk) flips, zooms and reads out the float images.")
-    c.add_argument("scene", help="scene file")
+    c.add_argument("scene", help=SCENE_HELP)
     c.add_argument("--reference", required=True, help="reference EXR (tracer reference)")
     c.add_argument("--strategies", default=",".join(CLASSIC_STRATEGIES),
                    help=f"comma-separated strategies, some of {', '.join(STRATEGIES)} (default: all but ris)")
@@ -197,8 +203,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "reference (t-test) and refuses entries too heavy-tailed for that, naming the spp "
                         "they need.")
     ch.add_argument("--baseline", default=None,
-                    help="baseline JSON (default: ./tracer_baseline.json if present, else the source "
-                    "checkout's renders/noise_baseline.json)")
+                    help="baseline JSON (default: ./tracer_baseline.json if present, else the shipped "
+                    "scenes' renders/noise_baseline.json of the source checkout tracer runs from, or else of "
+                    "the one the current folder is in; the command says which it used)")
     ch.add_argument("--update", action="store_true",
                     help="re-measure the baseline's entries and rewrite it (refuses entries too heavy-tailed "
                     "to test)")
@@ -206,7 +213,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="write a new baseline for --scenes x --strategies, rendering MIS references into "
                     "references/ beside it")
     ch.add_argument("--scenes", metavar="A.toml,B.toml",
-                    help="with --create: comma-separated scene files (or shipped scene names)")
+                    help="with --create: comma-separated scene files or shipped scene names (tracer scenes "
+                    "lists them)")
     ch.add_argument("--strategies", metavar="LIST",
                     help="with --create: comma-separated strategies (uniform, cosine, bsdf, light, mis, "
                     "mis-balance, mis-power, mis-max)")
@@ -222,7 +230,8 @@ def build_parser() -> argparse.ArgumentParser:
     ch.add_argument("--sampler", choices=SAMPLERS, default=None, metavar="NAME",
                     help=f"with --create: the sampler of every entry, one of %(choices)s "
                     f"(default {DEFAULT_SAMPLER})")
-    ch.add_argument("--out", default="check_failures", help="where the maps of failing entries go")
+    ch.add_argument("--out", default="check_failures", help="where the maps of failing entries go, a "
+                    "folder per entry named SCENE_STRATEGY (default check_failures)")
     ch.add_argument("--seed-offset", type=_seed, default=0,
                     help="add this to every seed (other random numbers, same statistics)")
     ch.add_argument("--threads", type=_threads, default=os.cpu_count() or 1, help="worker threads")
@@ -271,13 +280,21 @@ def build_parser() -> argparse.ArgumentParser:
                         "and write the TOML scene that renders the same (the same scene digest, checked by "
                         "reading it back), with every mesh, Mitsuba cube and disk as a PLY file beside it "
                         "(STEM_shapeN.ply).")
-    cv.add_argument("scene", help="scene file (.xml: Mitsuba 3; anything else: TOML)")
+    cv.add_argument("scene", help="scene file (.xml: Mitsuba 3; anything else: TOML), or the name of a "
+                    "scene shipped with tracer (tracer scenes lists them)")
     cv.add_argument("-o", "--output", help="TOML file to write (default: SCENE.toml here)")
     cv.add_argument("--width", type=_side, help="film width to convert at (a Mitsuba scene's field of view "
                     "follows its fov_axis; the TOML holds the vertical angle at this size)")
     cv.add_argument("--height", type=_side, help="film height to convert at")
     cv.add_argument("--quiet", action="store_true", help="no summary line")
     cv.set_defaults(run=cmd_convert)
+
+    sc = sub.add_parser("scenes", help="list the scenes shipped with tracer, by name",
+                        description="List the scenes shipped with tracer, one line each: the name that "
+                        "every command taking a scene accepts (tracer render cornell) and what the scene "
+                        "shows. A file of that name in the current folder is used before a shipped scene.")
+    sc.add_argument("--paths", action="store_true", help="also print each scene's file (to copy and edit)")
+    sc.set_defaults(run=cmd_scenes)
     return parser
 
 
@@ -627,11 +644,25 @@ def _warn_if_dark(scene) -> None:
               "will be black", file=sys.stderr)
 
 
+def _refuse_existing_render(output: Path) -> None:
+    """InputError before any rendering if the EXR or its PNG preview exists: a render never
+    replaces what an earlier one computed unless asked (--force), as ``tracer reference`` does.
+    Renders of two scenes with the same name (veach_mis.toml and mitsuba/veach_mis.xml) get the
+    same default name; this is what stops the second from silently replacing the first."""
+    exr, png = output, output.with_suffix(".png")
+    if os.path.lexists(exr):
+        raise InputError("a render exists here: --force replaces it, or -o OUT.exr writes another file",
+                         str(exr))
+    if os.path.lexists(png):
+        raise InputError("a file exists where this render's PNG preview goes: --force replaces it, or "
+                         "-o OUT.exr writes another file", str(png))
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from . import scene as scene_mod
     from .render_loop import RenderSettings, render
 
-    scene_path = Path(args.scene) if args.scene else scene_mod.default_scene_path()
+    scene_path = scene_mod.resolve_scene(args.scene) if args.scene else scene_mod.default_scene_path()
     scene = scene_mod.load_scene(scene_path, args.width, args.height)
     defaults = scene.render_defaults
     strategy = _strategy_from(args, args.strategy or defaults.get("strategy", "mis"),
@@ -643,6 +674,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     seed_part = f"_seed{args.seed}" if args.seed else ""
     sampler_part = f"_{sampler}" if sampler != DEFAULT_SAMPLER else ""
     output = _exr_path(args.output or f"{scene.name}_{strategy.slug}{sampler_part}{seed_part}.exr")
+    if not args.force:
+        _refuse_existing_render(output)
     _warn_if_dark(scene)
     settings = RenderSettings(spp=spp, seed=args.seed, threads=args.threads, sampler=sampler)
     result = render(scene, strategy, settings, progress=not args.quiet)
@@ -655,7 +688,8 @@ def cmd_reference(args: argparse.Namespace) -> int:
     from .render_loop import RenderSettings, render
     from .strategy import Strategy
 
-    output = _exr_path(args.output or f"{Path(args.scene).stem}_reference.exr")
+    scene_path = scene_mod.resolve_scene(args.scene)
+    output = _exr_path(args.output or f"{scene_path.stem}_reference.exr")
     film, seed, first, sampler = None, args.seed, 0, args.sampler
     # Strategy's defaults, but the light sampling: None = the scene's [render] default, else area.
     defaults = {name: getattr(Strategy(), name) for name in ("heuristic", "light_samples", "bsdf_samples",
@@ -681,7 +715,7 @@ def cmd_reference(args: argparse.Namespace) -> int:
     for name, value in defaults.items():
         if getattr(args, name) is None:
             setattr(args, name, value)
-    scene = scene_mod.load_scene(args.scene, width, height)
+    scene = scene_mod.load_scene(scene_path, width, height)
     strategy = _strategy_from(args, "mis", args.light_sampling or scene.render_defaults.get("light_sampling"))
     _warn_if_dark(scene)
     if film is not None:
@@ -735,6 +769,18 @@ def cmd_reference(args: argparse.Namespace) -> int:
                        half=not args.float)
 
 
+def cmd_scenes(args: argparse.Namespace) -> int:
+    """One line per shipped scene on stdout: its name and description (and with --paths its file)."""
+    from .scene import shipped_scenes
+
+    scenes = shipped_scenes()
+    width = max(len(s.name) for s in scenes)
+    for s in scenes:
+        line = f"{s.name:<{width}}  {s.description}"
+        print(f"{line}  ({s.path})" if args.paths else line)
+    return 0
+
+
 def cmd_merge(args: argparse.Namespace) -> int:
     from .film import merge_renders
     from .imagefiles import exr_is_half, read_exr
@@ -754,7 +800,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
     from . import scene as scene_mod
     from .scene.toml_writer import write_scene
 
-    output = Path(args.output or f"{Path(args.scene).stem}.toml")
+    scene_path = scene_mod.resolve_scene(args.scene)
+    output = Path(args.output or f"{scene_path.stem}.toml")
     if output.suffix.lower() != ".toml":
         raise InputError("output must end in .toml", str(output))
     folder = output.parent if str(output.parent) else Path(".")
@@ -763,12 +810,12 @@ def cmd_convert(args: argparse.Namespace) -> int:
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError("output folder is not writable", str(folder))
     try:
-        same = Path(args.scene).resolve() == output.resolve()
+        same = scene_path.resolve() == output.resolve()
     except OSError:
         same = False
     if same:
         raise InputError("the output would replace the scene it is converted from", str(output))
-    scene = scene_mod.load_scene(args.scene, width=args.width, height=args.height)
+    scene = scene_mod.load_scene(scene_path, width=args.width, height=args.height)
     # The files are written together: a signal while they are is held until all are.
     with interrupts.deferred() as arrived:
         written = write_scene(scene, output, args.scene)
@@ -860,7 +907,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     # The report is many files; a signal while they are written is held until all are.
     with interrupts.deferred() as arrived:
         document = report.make_report(out, scene.name, args.reference, reference, runs, mode, sweep,
-                                      allocation, args.crop, args.exposure, args.target, tuple(formats))
+                                      allocation, args.crop, args.exposure, args.target, tuple(formats),
+                                      say=None if args.quiet else lambda text: print(text, file=sys.stderr))
     if not args.quiet:
         width = max(len(r["name"]) for r in document["results"])
         seconds = "CPU s" if args.clock == "cpu" else "seconds"
@@ -905,7 +953,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def _check(args: argparse.Namespace, client) -> int:
-    from .study.check import create_baseline, default_baseline, format_table, parse_strategies, run_check
+    from .study.check import create_baseline, find_default_baseline, format_table, parse_strategies, run_check
 
     create_options = {"--scenes": args.scenes, "--strategies": args.strategies, "--spp": args.spp,
                       "--seeds": args.seeds, "--reference-spp": args.reference_spp, "--size": args.size,
@@ -931,9 +979,14 @@ def _check(args: argparse.Namespace, client) -> int:
         print(f"baseline written: {args.create} ({len(result.measurements)} entries); check with "
               f"tracer check --baseline {args.create}", file=sys.stderr)
         return 0
-    baseline = Path(args.baseline) if args.baseline else default_baseline()
-    if not args.baseline:
-        print(f"baseline: {baseline}", file=sys.stderr)
+    if args.baseline:
+        baseline = Path(args.baseline)
+    else:
+        # Said first: the default depends on the current folder and on how tracer was installed.
+        # (A baseline given with --baseline is not repeated here, so that bad input stays one
+        # line; the last line names the baseline either way.)
+        baseline, why = find_default_baseline()
+        print(f"baseline: {baseline} ({why})", file=sys.stderr)
     result = run_check(baseline, update=args.update, out=_output_folder(args.out),
                        seed_offset=args.seed_offset, threads=args.threads, client=client)
     if args.update:
@@ -941,10 +994,11 @@ def _check(args: argparse.Namespace, client) -> int:
         return 0
     print(format_table(result.verdicts))
     if result.ok:
-        print(f"check passed: {len(result.measurements)} entries", file=sys.stderr)
+        print(f"check passed: {len(result.measurements)} entries of {baseline}", file=sys.stderr)
         return 0
     failing = sorted({v.entry for v in result.verdicts if not v.ok})
-    print(f"check FAILED: {', '.join(failing)}; maps in {args.out}/", file=sys.stderr)
+    folders = ", ".join(f"{folder}/" for folder in result.failure_folders.values())
+    print(f"check FAILED: {', '.join(failing)} (baseline {baseline}); maps in {folders}", file=sys.stderr)
     return EXIT_CHECK_FAILED
 
 

@@ -3,7 +3,8 @@
 Readers: ``toml_reader.py`` for tracer's own TOML format (``docs/SCENE_FORMAT.md``) and
 ``mitsuba_xml.py`` for Mitsuba 3 XML scenes (``docs/MITSUBA_XML.md``), chosen by file suffix:
 ``.xml`` is Mitsuba's, anything else TOML. Both produce the same :class:`Scene`;
-``toml_writer.py`` writes any scene back as TOML (``tracer convert``).
+``toml_writer.py`` writes any scene back as TOML (``tracer convert``). A scene is a file path
+or the name of a scene shipped in the package (``shipped.py``: ``cornell``, ``mitsuba/veach_mis``).
 
 Notes: what a scene asks for that tracer does not do (a Mitsuba scene's integrator, pixel
 filter, ...) is told in one line per load to ``notify``, or, without one, to the handler of
@@ -15,19 +16,19 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from .. import notices
 from ..errors import InputError
 from .model import Scene, Shape
+from .shipped import ShippedScene, resolve_scene, shipped_folder, shipped_scenes
 from .toml_reader import check_resolution, read_toml_file, scene_from_document
 
 
 def default_scene_path() -> Path:
     """The scene ``tracer render`` uses without an argument: ``veach_mis``, shipped in the package."""
-    return Path(str(resources.files("tracer") / "scenes" / "veach_mis.toml"))
+    return shipped_folder() / "veach_mis.toml"
 
 
 def load_scene(source: str | os.PathLike[str] | dict[str, Any], width: int | None = None,
@@ -35,9 +36,10 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any], width: int | Non
                notify: Callable[[str], None] | None = None) -> Scene:
     """Read and validate a scene.
 
-    source : a scene file path (``.xml``: a Mitsuba 3 scene, anything else TOML), or a scene
-        document as a dict (the TOML file's tables as Python values, e.g.
-        ``{"camera": {...}, "shapes": [...]}``).
+    source : a scene file path (``.xml``: a Mitsuba 3 scene, anything else TOML), the name of
+        a scene shipped with tracer (``"cornell"``, ``"mitsuba/veach_mis"``: ``tracer scenes``
+        lists them; an existing file of that name wins), or a scene document as a dict (the
+        TOML file's tables as Python values, e.g. ``{"camera": {...}, "shapes": [...]}``).
     width, height : override the camera's resolution.
     base_dir : the folder mesh files are relative to (default: the scene file's folder, or
         the current folder for a dict).
@@ -52,7 +54,7 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any], width: int | Non
         return scene_from_document(source, "<dict>", base, width, height)
     if not isinstance(source, (str, os.PathLike)):
         raise InputError(f"a scene is a file path or a dict, not {type(source).__name__}")
-    path = str(source)
+    path = str(resolve_scene(source))
     base = Path(base_dir) if base_dir is not None else Path(path).parent
     if Path(path).suffix.lower() == ".xml":
         from .mitsuba_xml import read_mitsuba_scene
@@ -61,4 +63,5 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any], width: int | Non
     return scene_from_document(read_toml_file(path), path, base, width, height)
 
 
-__all__ = ["Scene", "Shape", "check_resolution", "default_scene_path", "load_scene"]
+__all__ = ["Scene", "Shape", "ShippedScene", "check_resolution", "default_scene_path", "load_scene",
+           "resolve_scene", "shipped_scenes"]

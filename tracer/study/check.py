@@ -71,6 +71,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import sys
 import zlib
 from dataclasses import dataclass, field
@@ -86,7 +87,8 @@ from ..imagefiles import exr_is_half, read_exr, write_exr, write_png
 from ..inputfiles import read_regular_file
 from ..render_loop import RenderResult, RenderSettings, render_complete
 from ..sampler_choice import DEFAULT_SAMPLER, SAMPLERS, replicates_of
-from ..scene import Scene, default_scene_path, load_scene
+from ..scene import Scene, load_scene, resolve_scene, shipped_scenes
+from ..scene.shipped import shipped_names
 from ..strategy import (
     DEFAULT_LIGHT_SAMPLING,
     HEURISTICS,
@@ -212,8 +214,12 @@ class Verdict:
 
 @dataclass
 class CheckResult:
+    """The verdicts, the measurements by entry name, and the folder each failing entry's maps
+    were written to (``write_failures``), by entry name."""
+
     verdicts: list[Verdict] = field(default_factory=list)
     measurements: dict[str, Measurement] = field(default_factory=dict)
+    failure_folders: dict[str, Path] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -224,27 +230,68 @@ class CheckResult:
 # Baseline files
 
 
+# The shipped scenes' baseline, in a source checkout of tracer (not in the installed package:
+# its references are 3 MB of EXR that only the shipped scenes need).
+CHECKOUT_BASELINE = Path("renders") / "noise_baseline.json"
+
+
+def is_tracer_checkout(folder: Path) -> bool:
+    """Whether ``folder`` is the root of a source checkout of tracer: its pyproject.toml names
+    the project tracer, and it holds the shipped scenes' baseline."""
+    import tomllib
+
+    try:
+        project = tomllib.loads((folder / "pyproject.toml").read_text(encoding="utf-8")).get("project", {})
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return False
+    return isinstance(project, dict) and project.get("name") == "tracer" and \
+        (folder / CHECKOUT_BASELINE).is_file()
+
+
 def repository_baseline() -> Path | None:
-    """``renders/noise_baseline.json`` of the source checkout this tracer runs from (a clone or
-    an editable install), or None for an installed package, which does not ship it."""
+    """``renders/noise_baseline.json`` of the source checkout this tracer runs from (an editable
+    install, or the tests run in a clone), or None for an installed package (``pip install .``
+    copies the package into site-packages, away from the clone's renders/)."""
     root = Path(__file__).resolve().parents[2]
-    path = root / "renders" / "noise_baseline.json"
-    return path if (root / "pyproject.toml").is_file() and path.is_file() else None
+    return root / CHECKOUT_BASELINE if is_tracer_checkout(root) else None
+
+
+def checkout_baseline(folder: Path | None = None) -> Path | None:
+    """``renders/noise_baseline.json`` of the source checkout of tracer that ``folder`` (default:
+    the current folder) is in, it or a parent of it; None outside one. This is how a clone
+    installed with a plain ``pip install .`` (the quick start) finds its baseline."""
+    here = (folder or Path.cwd()).resolve()
+    for candidate in (here, *here.parents):
+        if is_tracer_checkout(candidate):
+            return candidate / CHECKOUT_BASELINE
+    return None
+
+
+def find_default_baseline() -> tuple[Path, str]:
+    """The baseline ``tracer check`` uses without ``--baseline`` and why, in this order:
+    ``./tracer_baseline.json`` if the current folder has one (a project's own baseline, made
+    with ``--create``); the shipped scenes' baseline of the source checkout this tracer runs
+    from (editable install); that of the source checkout the current folder is in (a clone
+    installed with ``pip install .``); else InputError saying how to make one."""
+    local = Path(BASELINE_NAME)
+    if local.is_file():
+        return local, "in the current folder"
+    running = repository_baseline()
+    if running is not None:
+        return running, "the shipped scenes' baseline of the source checkout tracer runs from"
+    here = checkout_baseline()
+    if here is not None:
+        return here, "the shipped scenes' baseline of the source checkout the current folder is in"
+    raise InputError("no baseline here, and tracer is not run from or in a source checkout of tracer (an "
+                     "installed tracer ships none): pass --baseline FILE, run tracer check in a clone of "
+                     "tracer for its shipped scenes, or make one for your scenes with tracer check --create "
+                     f"{BASELINE_NAME} --scenes A.toml,B.toml --strategies light,mis "
+                     "(README: Noise regression tests)", BASELINE_NAME)
 
 
 def default_baseline() -> Path:
-    """The baseline ``tracer check`` uses without ``--baseline``: ``./tracer_baseline.json`` if
-    the current folder has one (a project's own baseline, made with ``--create``), else the
-    shipped scenes' baseline of a source checkout, else InputError saying how to make one."""
-    local = Path(BASELINE_NAME)
-    if local.is_file():
-        return local
-    shipped = repository_baseline()
-    if shipped is not None:
-        return shipped
-    raise InputError(f"no baseline here and none shipped with an installed tracer: pass --baseline FILE, or "
-                     f"make one for your scenes with tracer check --create {BASELINE_NAME} --scenes "
-                     "A.toml,B.toml --strategies light,mis (README: Noise regression tests)", BASELINE_NAME)
+    """The baseline ``tracer check`` uses without ``--baseline`` (:func:`find_default_baseline`)."""
+    return find_default_baseline()[0]
 
 
 def load_baseline(path: str | os.PathLike[str]) -> list[Entry]:
@@ -405,10 +452,13 @@ def check_seeds(entries: list[Entry], where: str) -> None:
 
 
 def scene_path(entry: Entry, base: Path) -> Path:
-    """A shipped scene by name (beside the default scene), else a path relative to the baseline
-    file's folder."""
-    shipped = default_scene_path().parent / f"{entry.scene}.toml"
-    return shipped if shipped.is_file() else base / entry.scene
+    """The entry's scene: a file relative to the baseline file's folder if there is one, else a
+    shipped scene by name (``tracer.scene.shipped``, the resolver of every command: a file wins
+    over a name), else InputError listing the shipped names."""
+    beside = base / entry.scene
+    if os.path.lexists(beside) and not beside.is_dir():
+        return beside
+    return resolve_scene(entry.scene)
 
 
 def downsampled_reference(reference: Film, factor: int, half: bool) -> tuple[np.ndarray, ...]:
@@ -759,7 +809,7 @@ def run_check(
         return result
     result.verdicts = judge(entries, result.measurements)
     if not result.ok and out is not None:
-        write_failures(out, entries, result)
+        result.failure_folders = write_failures(out, entries, result)
     return result
 
 
@@ -850,20 +900,10 @@ def create_baseline(
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise InputError("the baseline's folder does not exist", str(folder))
-    shipped_dir = default_scene_path().parent
     prepared = []  # (scene key, scene file, reference key)
     used_names: set[str] = set()
     for text in scenes:
-        text = text.strip()
-        if Path(text).is_file():
-            file = Path(text)
-            rel = os.path.relpath(file.resolve(), folder.resolve())
-            key = rel if not os.path.isabs(rel) else str(file.resolve())
-            name = file.name
-        elif (shipped_dir / f"{text}.toml").is_file():
-            file, key, name = shipped_dir / f"{text}.toml", text, text
-        else:
-            raise InputError("no such scene file (nor a shipped scene's name)", text[:300], "--scenes")
+        key, file, name = baseline_scene(text.strip(), folder)
         if key in (k for k, _, _ in prepared):
             continue
         unique, i = name, 2
@@ -893,6 +933,25 @@ def create_baseline(
     _measure_all(entries, folder, 0, threads, stream, result, client)
     _write_update(path, entries, result, stream)
     return result
+
+
+def baseline_scene(text: str, folder: Path) -> tuple[str, Path, str]:
+    """A ``--scenes`` item as (the entry's ``scene`` key, the scene file, the name of its
+    reference file): a scene file is keyed by its path relative to the baseline's ``folder``
+    (absolute if there is none) and its reference by its file name; a shipped scene by its name
+    (``tracer.scene.shipped``), wherever the baseline is, and its reference by that name with
+    "_" for "/" (``mitsuba/veach_mis``: ``mitsuba_veach_mis``). InputError for neither."""
+    try:
+        file = resolve_scene(text)
+    except InputError as exc:
+        raise InputError(str(exc), "--scenes") from None
+    shipped = {s.path.resolve(): s.name for s in shipped_scenes()}
+    if Path(text).exists() or file.resolve() not in shipped:
+        rel = os.path.relpath(file.resolve(), folder.resolve())
+        return (rel if not os.path.isabs(rel) else str(file.resolve())), file, file.name
+    name = shipped[file.resolve()]
+    # references/NAME.exr, as Entry.reference_key names a shipped scene's reference by default.
+    return name, file, name.replace("/", "_")
 
 
 def make_reference(scene_file: Path, ref_path: Path, size: int, spp: int, threads: int, stream) -> None:
@@ -931,17 +990,44 @@ def format_table(verdicts: list[Verdict]) -> str:
     return "\n".join(lines)
 
 
-def write_failures(out: Path, entries: list[Entry], result: CheckResult) -> None:
-    """For each failing entry: image.exr, reference.exr, error.png and pvalue.png in out/ENTRY/."""
+def failure_folder_names(entries: list[Entry]) -> dict[str, str]:
+    """The folder name of each entry's failure maps, by entry name: the scene's stem (a shipped
+    Mitsuba scene's name with "_" for "/") and the strategy's slug, as ``tracer render`` names
+    its output (``room_mis``, ``cornell_light_sobol``, ``mitsuba_veach_mis_mis_balance``), in
+    letters, digits, ``.``, ``_`` and ``-`` only, never starting with a dot (``../room.toml``
+    made a hidden ``.._room.toml_mis-power``), and unique over the whole baseline (``-2``,
+    ``-3``, ... in entry order), so that an entry's folder does not depend on which others fail."""
+    shipped = set(shipped_names())
+    names: dict[str, str] = {}
+    used: set[str] = set()
+    for e in entries:
+        scene = e.scene.replace("/", "_") if e.scene in shipped else Path(e.scene).stem
+        sampler = f"_{e.sampler}" if e.sampler != DEFAULT_SAMPLER else ""
+        text = f"{scene}_{e.strategy_object().slug}{sampler}"
+        base = re.sub(r"[^A-Za-z0-9._-]+", "_", text).lstrip("._-")[:120] or "entry"
+        unique, i = base, 2
+        while unique in used:
+            unique, i = f"{base}-{i}", i + 1
+        used.add(unique)
+        names[e.name] = unique
+    return names
+
+
+def write_failures(out: Path, entries: list[Entry], result: CheckResult) -> dict[str, Path]:
+    """For each failing entry: image.exr, reference.exr, error.png and pvalue.png in a folder
+    of ``out`` named by :func:`failure_folder_names`; returns those folders by entry name."""
     from .report import save_map
 
     failing = {v.entry for v in result.verdicts if not v.ok}
+    folder_names = failure_folder_names(entries)
+    written: dict[str, Path] = {}
     for e in entries:
         if e.name not in failing:
             continue
         m = result.measurements[e.name]
-        folder = out / e.name.replace("/", "_")
+        folder = out / folder_names[e.name]
         folder.mkdir(parents=True, exist_ok=True)
+        written[e.name] = folder
         reference = Film(
             m.pooled.width,
             m.pooled.height,
@@ -972,3 +1058,4 @@ def write_failures(out: Path, entries: list[Entry], result: CheckResult) -> None
             vmin=-12.0,
             vmax=0.0,
         )
+    return written

@@ -318,23 +318,39 @@ class Comparison:
         """:meth:`convergence` for every ``(strategy, sampler)`` of ``items`` and every seed, each
         strategy's seeds up to the same spp: its first seed's sweep decides it (``max_spp``, or as
         far as the ``budget`` goes), so that each point has every seed and the mean over seeds is
-        taken at the same spp. The first seeds run first (as tasks with a ``client``), then
-        the others."""
+        taken at the same spp. With a ``client`` the first seeds run first, as tasks, then the
+        others (its progress bar shows them); here each strategy's seeds run in turn and its
+        line is said as it is done, so that a sweep of many seconds is not silent."""
+        methods = f"{len(items)} method{'s' if len(items) != 1 else ''}"
+        self._say(f"  sweep: relMSE at spp 1, 2, 4, ... of {methods} x {len(seeds)} seeds")
+        if client is None:
+            out: list[dict[str, Any]] = []
+            for strategy, sampler in items:
+                points = self.convergence(strategy, max_spp, budget, seeds[0], sampler)
+                for seed in seeds[1:]:
+                    points += self.convergence(strategy, points[-1]["spp"], None, seed, sampler)
+                out += self._swept(strategy, sampler, points, len(seeds))
+            return out
         first = self.perform([("convergence", (strategy, max_spp, budget, seeds[0], sampler))
                               for strategy, sampler in items], client)
         rest = self.perform([("convergence", (strategy, points[-1]["spp"], None, seed, sampler))
                              for (strategy, sampler), points in zip(items, first, strict=True)
                              for seed in seeds[1:]], client)
-        out: list[dict[str, Any]] = []
+        out = []
         others = len(seeds) - 1
         for i, ((strategy, sampler), points) in enumerate(zip(items, first, strict=True)):
             points = points + [p for seed_points in rest[i * others:(i + 1) * others] for p in seed_points]
-            last = points[-1]["spp"]
-            spent = sum(p["seconds"] for p in points if p["spp"] == last)
-            self._say(f"  sweep {_described(strategy, sampler)}: {len(seeds)} seeds x "
-                      f"{len(points) // len(seeds)} points up to {last} spp, {spent:.2f} {self.unit}")
-            out += points
+            out += self._swept(strategy, sampler, points, len(seeds))
         return out
+
+    def _swept(self, strategy: Strategy, sampler: str, points: list[dict[str, Any]],
+               seeds: int) -> list[dict[str, Any]]:
+        """Say one strategy's sweep line (its seeds, points, last spp and time there); return its points."""
+        last = points[-1]["spp"]
+        spent = sum(p["seconds"] for p in points if p["spp"] == last)
+        self._say(f"  sweep {_described(strategy, sampler)}: {seeds} seeds x "
+                  f"{len(points) // seeds} points up to {last} spp, {spent:.2f} {self.unit}")
+        return points
 
     def sweep(self, strategy: Strategy, seeds: list[int], max_spp: int | None = None,
               budget: float | None = None, sampler: str = DEFAULT_SAMPLER) -> list[dict[str, Any]]:
