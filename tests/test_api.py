@@ -14,41 +14,31 @@ import pytest
 import tracer
 from tracer.scene import default_scene_path
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+ROOT = Path(__file__).resolve().parent.parent
+# The Python examples a newcomer meets first: the README's and the guide's API page, each the
+# first python block after its heading.
+EXAMPLES = {"README.md": "## Python", "docs/guide/python-api.md": "# Python API"}
 
 
-def _readme_example() -> str:
-    text = README.read_text()
-    section = text[text.index("## Python API"):]
+def _example(document: str) -> str:
+    text = (ROOT / document).read_text()
+    section = text[text.index(EXAMPLES[document] + "\n"):]
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
-def test_readme_example_runs(tmp_path, monkeypatch, capsys):
-    """The API section's example, verbatim, in an empty folder of one's own: it renders,
-    compares and writes the EXR and PNG it says it writes. It names its scene by the shipped
-    name (``load_scene("cornell")``), which works from any folder; an example that names a
-    path under scenes/ (the checkout's link to tracer/scenes) gets that link made for it."""
-    example = _readme_example()
-    if "scenes/" in example:
-        (tmp_path / "scenes").symlink_to(default_scene_path().parent, target_is_directory=True)
+@pytest.mark.parametrize("document", list(EXAMPLES))
+def test_documented_example_runs_from_any_folder(document, tmp_path, monkeypatch, capsys):
+    """The example, verbatim, in an empty folder of its own: it names its scene by the shipped
+    name (``load_scene("cornell")``), which works from any folder, renders, compares and writes
+    the EXR and PNG it says it writes."""
+    example = _example(document)
     monkeypatch.chdir(tmp_path)
-    exec(compile(example, "README.md", "exec"), {})
+    exec(compile(example, document, "exec"), {})
     out = capsys.readouterr().out
     assert "(64, 64, 3) (64, 64, 3) 16" in out and "relmse" in out
     assert (tmp_path / "cornell_mis.exr").is_file() and (tmp_path / "cornell_mis.png").is_file()
     back = tracer.read_image(tmp_path / "cornell_mis.exr")
     assert back.spp == 16 and back.film.record.heuristic == "balance"
-
-
-def test_the_readme_example_runs_from_any_folder_by_scene_name(tmp_path, monkeypatch, capsys):
-    """The README example with its scene named as a newcomer names it, "cornell", in an empty
-    folder without scenes/: what a user outside the checkout can run."""
-    example = re.sub(r'load_scene\("[^"]*cornell\.toml"', 'load_scene("cornell"', _readme_example())
-    assert 'load_scene("cornell"' in example
-    monkeypatch.chdir(tmp_path)
-    exec(compile(example, "README.md", "exec"), {})
-    assert "(64, 64, 3) (64, 64, 3) 16" in capsys.readouterr().out
-    assert (tmp_path / "cornell_mis.exr").is_file()
 
 
 def test_help_shows_the_api():
