@@ -1,7 +1,7 @@
 """The one way tracer compiles its per-lane code: numba's ``njit`` with fixed options.
 
 The estimator runs loops over lanes in compiled code instead of ~100 whole-array numpy passes
-(see the README's Performance section): one pass per batch, no temporaries. Options:
+(see the documentation's results page on performance): one pass per batch, no temporaries. Options:
 
 - caching: compiled machine code is kept beside the sources (``__pycache__``), or under
   ``NUMBA_CACHE_DIR`` when that is set, else in the user's cache folder, so only the first run

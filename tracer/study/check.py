@@ -1,6 +1,6 @@
 """Noise-level regression test: has a change made an estimator noisier, or biased?
 
-A baseline file (JSON, format in README "Noise regression tests") lists entries ``{"scene",
+A baseline file (JSON, format in the guide, docs/guide/noise-tests.md) lists entries ``{"scene",
 "strategy", "heuristic", "spp", "seeds", "relmse", "variance", "image_means", ...}``. For each
 entry the check renders the scene once per seed at a small resolution (the reference's
 resolution divided by ``downsample``), each seed in ``REPLICATES_PER_SEED`` renders of
@@ -286,7 +286,7 @@ def find_default_baseline() -> tuple[Path, str]:
                      "installed tracer ships none): pass --baseline FILE, run tracer check in a clone of "
                      "tracer for its shipped scenes, or make one for your scenes with tracer check --create "
                      f"{BASELINE_NAME} --scenes A.toml,B.toml --strategies light,mis "
-                     "(README: Noise regression tests)", BASELINE_NAME)
+                     "(guide: Noise regression tests)", BASELINE_NAME)
 
 
 def default_baseline() -> Path:
@@ -393,7 +393,7 @@ def _field_problem(name: str, value: Any, raw: dict[str, Any]) -> str | None:
 def save_baseline(path: str | os.PathLike[str], entries: list[Entry]) -> None:
     """Write the baseline atomically."""
     doc = {
-        "about": "tracer check noise baseline (README: Noise regression tests): per entry the scene (a "
+        "about": "tracer check noise baseline (guide: Noise regression tests): per entry the scene (a "
         "shipped scene's name or a path relative to this file), strategy, spp, seeds and the reference "
         "(default references/<scene>.exr beside this file); relmse/variance are means over the seeds, "
         "*_seeds the per-seed values, image_means the image mean of each replicate render (seed 1's "

@@ -50,7 +50,7 @@ HEAVY_TAIL_NOTE = (
 # Why stratified and Sobol points can beat 1/spp: said where a slope's interval lies below -1.
 FAST_NOTE = (
     "An interval below -1 (‡) falls faster than 1/spp: stratified or quasi-Monte Carlo points, whose "
-    "samples avoid each other (README: Samplers); independent samples cannot, on average.")
+    "samples avoid each other (guide: Samplers); independent samples cannot, on average.")
 
 
 def _slope_side(row: dict[str, Any]) -> str:
