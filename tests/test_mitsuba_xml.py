@@ -1321,3 +1321,12 @@ def test_hostile_documents_are_refused_in_one_line(tmp_path):
         assert "\n" not in message and len(message) < 400, message
         for word in words:
             assert word in message, (name, message)
+
+
+def test_the_direct_integrator_is_not_reported_as_not_obeyed(tmp_path):
+    """`<integrator type="direct">` is what tracer renders: a scene that asks for it gets no note
+    (it used to say "not obeyed" for it); any other integrator still does (test above)."""
+    path = write(tmp_path, '<integrator type="direct"/>\n<shape type="rectangle">' + EMIT + "</shape>")
+    notes: list[str] = []
+    load_scene(path, notify=notes.append)
+    assert notes == []

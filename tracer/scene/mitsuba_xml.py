@@ -439,7 +439,10 @@ class _SceneReader:
         p = self.plugin(element)
         p.used.update(p.props)
         p.taken.update(id(written) for _, written in p.objects)
-        self.notes.append(f"<integrator type=\"{shown(p.type)}\">")
+        # Mitsuba's direct integrator is what tracer renders (with its own strategies in place of
+        # emitter_samples/bsdf_samples): nothing to tell. Any other is not obeyed, and said.
+        if p.type != "direct":
+            self.notes.append(f"<integrator type=\"{shown(p.type)}\">")
 
     # -- shapes ----------------------------------------------------------------------------
 
