@@ -721,6 +721,13 @@ def test_baseline_scenes_are_resolved_as_every_command_resolves_them(tmp_path, m
     (folder / "cornell").write_text(DIFFUSE_SCENE)  # beside the baseline: an entry's file wins
     own = check.scene_path(check.Entry(scene="cornell", strategy="mis", spp=1, seeds=[1]), folder)
     assert own == folder / "cornell"
+    # An entry is relative to the baseline, never to the current folder (which has a cornell.toml
+    # and a room.toml): there it is the shipped scene, or the missing file beside the baseline.
+    (tmp_path / "room.toml").write_text(DIFFUSE_SCENE)
+    entry = check.Entry(scene="cornell.toml", strategy="mis", spp=1, seeds=[1])
+    assert check.scene_path(entry, folder) == resolve_scene("cornell") != tmp_path / "cornell.toml"
+    entry = check.Entry(scene="room.toml", strategy="mis", spp=1, seeds=[1])
+    assert check.scene_path(entry, folder) == folder / "room.toml"
     unknown = r"^--scenes: cornel: no such scene file, nor a shipped .*tiny_light"
     with pytest.raises(InputError, match=unknown):
         check.baseline_scene("cornel", folder)

@@ -72,14 +72,22 @@ def resolve_scene(source: str | os.PathLike[str]) -> Path:
     # reader refuses it with its own message rather than this one hiding it behind a name.
     if os.path.lexists(text) and not os.path.isdir(text):
         return Path(text)
-    for scene in shipped_scenes():
-        if text in (scene.name, scene.name + scene.path.suffix):
-            return scene.path
+    shipped = shipped_scene_named(text)
+    if shipped is not None:
+        return shipped
     if os.path.isdir(text):
         return Path(text)
     names = ", ".join(shipped_names())
     raise InputError(f"no such scene file, nor a shipped scene's name (shipped: {names}; tracer scenes "
                      "describes them)", text)
+
+
+def shipped_scene_named(text: str) -> Path | None:
+    """The file of the shipped scene named ``text`` (with or without its suffix), or None."""
+    for scene in shipped_scenes():
+        if text in (scene.name, scene.name + scene.path.suffix):
+            return scene.path
+    return None
 
 
 def describe(path: Path) -> str:

@@ -88,7 +88,7 @@ from ..inputfiles import read_regular_file
 from ..render_loop import RenderResult, RenderSettings, render_complete
 from ..sampler_choice import DEFAULT_SAMPLER, SAMPLERS, replicates_of
 from ..scene import Scene, load_scene, resolve_scene, shipped_scenes
-from ..scene.shipped import shipped_names
+from ..scene.shipped import shipped_names, shipped_scene_named
 from ..strategy import (
     DEFAULT_LIGHT_SAMPLING,
     HEURISTICS,
@@ -453,12 +453,13 @@ def check_seeds(entries: list[Entry], where: str) -> None:
 
 def scene_path(entry: Entry, base: Path) -> Path:
     """The entry's scene: a file relative to the baseline file's folder if there is one, else a
-    shipped scene by name (``tracer.scene.shipped``, the resolver of every command: a file wins
-    over a name), else InputError listing the shipped names."""
+    shipped scene by name (``tracer.scene.shipped``: a file wins over a name, as for every
+    command), else that file (which the reader then says is missing). Unlike a command's
+    argument, an entry is never looked up in the current folder."""
     beside = base / entry.scene
-    if os.path.lexists(beside) and not beside.is_dir():
+    if os.path.lexists(beside):
         return beside
-    return resolve_scene(entry.scene)
+    return shipped_scene_named(entry.scene) or beside
 
 
 def downsampled_reference(reference: Film, factor: int, half: bool) -> tuple[np.ndarray, ...]:
