@@ -157,9 +157,11 @@ class _Reader:
     def _unknown(self) -> list[str]:
         return sorted(set(self.table) - set(self.declared))
 
-    def _close(self, name: str, candidates) -> str:
+    @staticmethod
+    def _closest(name: str, candidates) -> str | None:
+        """The candidate most like ``name`` (a typo's other half), or None."""
         match = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
-        return f" (did you mean '{match[0]}'?)" if match else ""
+        return match[0] if match else None
 
     def _full(self, name: str) -> str:
         return f"{self.key}.{name}" if self.key else name
@@ -181,8 +183,8 @@ class _Reader:
             if default is ...:
                 # A typo of a required key is missing under its own name and present, unknown,
                 # under another: name the one the file has.
-                typo = difflib.get_close_matches(name, self._unknown(), n=1, cutoff=0.6)
-                hint = f" (the table has '{typo[0]}', which is not a key: a typo?)" if typo else ""
+                typo = self._closest(name, self._unknown())
+                hint = f" (the table has '{typo}', which is not a key: a typo?)" if typo else ""
                 self.fail("missing required key" + hint, name)
             return default
         return self.table[name]
@@ -247,7 +249,8 @@ class _Reader:
         unknown = sorted(set(self.table) - self.used)
         if unknown:
             name = unknown[0]
-            self.fail(f"unknown key '{name}'{self._close(name, self.declared)}", name)
+            meant = self._closest(name, self.declared)
+            self.fail(f"unknown key '{name}'" + (f" (did you mean '{meant}'?)" if meant else ""), name)
 
 
 def _kind(value: Any) -> str:
