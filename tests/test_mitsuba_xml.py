@@ -697,7 +697,7 @@ def test_quads_and_polygons_are_fans_as_mitsubas_obj_loader_makes_them(tmp_path)
 
 
 @pytest.mark.parametrize("shape, words", [
-    ('<shape type="serialized"/>', ["serialized", "PLY"]),
+    ('<shape type="serialized"/>', ["serialized", "missing property 'filename'"]),
     ('<shape type="instance"/>', ["instance", "instancing"]),
     ('<shape type="shapegroup"/>', ["shapegroup"]),
     ('<shape type="cylinder"/>', ["cylinder"]),

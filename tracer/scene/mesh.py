@@ -42,11 +42,13 @@ class Mesh:
     vertices : (V, 3) float64.   faces : (F, 3) int64 indices into vertices.
     normals : (V, 3) float64 unit vertex normals from the file (normalized unless unit already),
         or None if it has none.
+    uv : (V, 2) float64 texture coordinates from the file, or None if it has none.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     normals: np.ndarray | None = None
+    uv: np.ndarray | None = None
 
 
 def import_trimesh():
@@ -86,6 +88,14 @@ def read_mesh_file(mesh_path: Path) -> Mesh:
         raise
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise MeshError(f"cannot read mesh {mesh_path}: {exc}") from None
+    return checked(mesh_path, Mesh(vertices, faces, normals))
+
+
+def checked(mesh_path: Path, mesh: Mesh) -> Mesh:
+    """``mesh`` with its normals made unit, once its arrays are checked: 3-D finite vertices in
+    range, face indices among them, one finite nonzero normal (and uv pair) per used vertex.
+    Raises MeshError naming ``mesh_path``."""
+    vertices, faces, normals, uv = mesh.vertices, mesh.faces, mesh.normals, mesh.uv
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
         raise MeshError(f"{mesh_path} holds no faces (triangles or polygons)")
     if vertices.ndim != 2 or vertices.shape[1] != 3:
@@ -114,7 +124,9 @@ def read_mesh_file(mesh_path: Path) -> Mesh:
         renormalize = np.abs(length - 1.0) > UNIT_TOLERANCE
         unit = normals / np.where(length > 0.0, length, 1.0)[:, None]
         normals = np.where(renormalize[:, None], unit, normals)
-    return Mesh(vertices, faces, normals)
+    if uv is not None and (uv.shape != (len(vertices), 2) or not np.all(np.isfinite(uv))):
+        raise MeshError(f"{mesh_path} has texture coordinates that are not one finite pair per vertex")
+    return Mesh(vertices, faces, normals, uv)
 
 
 def _load(trimesh, mesh_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:

@@ -44,6 +44,7 @@ from .mitsuba_document import (
     xyz,
 )
 from .model import Scene
+from .serialized import read_serialized
 from .toml_reader import MAX_COORDINATE, MAX_RADIANCE, MAX_SIDE, _Geometry, check_resolution
 
 # Mitsuba 3.9.1's defaults (checked by loading scenes and reading them back with mi.traverse).
@@ -449,11 +450,10 @@ class _SceneReader:
     def shape(self, element: Element) -> None:
         p = self.plugin(element)
         kind = p.type
-        if kind not in ("obj", "ply", "rectangle", "cube", "sphere", "disk"):
-            hints = {"serialized": " (convert it to PLY, e.g. with Mitsuba's Python API)",
-                     "instance": " (instancing)", "shapegroup": " (instancing)"}
+        if kind not in ("obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk"):
+            hints = {"instance": " (instancing)", "shapegroup": " (instancing)"}
             p.fail(f"shape '{shown(kind)}' is not supported{hints.get(kind, '')}; tracer reads obj, ply, "
-                   "rectangle, cube, sphere and disk")
+                   "serialized, rectangle, cube, sphere and disk")
         matrix = p.transform()
         matrix = np.eye(4) if matrix is None else matrix
         if np.max(np.abs(matrix)) > MAX_COORDINATE:
@@ -470,7 +470,7 @@ class _SceneReader:
         if kind == "sphere":
             self.sphere(p, matrix, flip, mirrored, material, emission)
             return
-        if kind in ("obj", "ply"):
+        if kind in ("obj", "ply", "serialized"):
             self.mesh(p, matrix, flip, mirrored, material, emission)
             return
         if kind == "rectangle":
@@ -524,10 +524,13 @@ class _SceneReader:
         if name is None:
             p.fail("missing property 'filename'")
         face_normals = p.boolean("face_normals", False)
-        p.boolean("flip_tex_coords", True)  # texture coordinates: nothing tracer reads
         path = self.document.find_file(name)
         try:
-            mesh = read_mesh_file(path)
+            if p.type == "serialized":
+                mesh = read_serialized(path, p.integer("shape_index", 0, 0, 2**31 - 1))
+            else:
+                p.boolean("flip_tex_coords", True)  # texture coordinates: nothing tracer reads
+                mesh = read_mesh_file(path)
         except MeshError as exc:
             (p.props.get("filename") or p.element).fail(str(exc), p.element)
         vertices = _apply(matrix, mesh.vertices)
