@@ -69,13 +69,13 @@ def test_every_block_and_every_mesh_of_a_file_reads_back(tmp_path, version, doub
     path.write_bytes(serialized_file(streams, version))
     first, second, third = (read_serialized(path, i) for i in range(3))
     np.testing.assert_array_equal(first.vertices, vertices)
-    assert first.normals is None and first.uv is None
+    assert first.normals is None and first.corner_uv is None
     np.testing.assert_array_equal(second.vertices, vertices + 5.0)
     np.testing.assert_array_equal(second.faces, faces[::-1])
     np.testing.assert_array_equal(second.normals, normals)
-    assert second.uv is None  # the colours in between were skipped, not taken for uv
+    assert second.corner_uv is None  # the colours in between were skipped, not taken for uv
     precision = 0.0 if double else 1e-7
-    np.testing.assert_allclose(third.uv, uv, atol=precision)
+    np.testing.assert_allclose(third.corner_uv, uv[faces].reshape(-1, 6), atol=precision)
     np.testing.assert_array_equal(third.vertices, vertices * 2.0)
 
 

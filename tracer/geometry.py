@@ -87,6 +87,21 @@ def surface_point(hit_table, first_sphere: int, p: int, o, d):
 
 
 @jit
+def barycentrics(hit_table, p: int, x):
+    """``(found, b1, b2)``: the barycentric weights of triangle ``p``'s corners 1 and 2 at point
+    ``x`` of its plane (x = v0 + b1 e1 + b2 e2); found is False for a zero-area triangle."""
+    e1 = (hit_table[p, 3], hit_table[p, 4], hit_table[p, 5])
+    e2 = (hit_table[p, 6], hit_table[p, 7], hit_table[p, 8])
+    q = (x[0] - hit_table[p, 0], x[1] - hit_table[p, 1], x[2] - hit_table[p, 2])
+    c = cross(e1, e2)
+    area2 = dot(c, c)
+    if area2 == 0.0:
+        return False, 0.0, 0.0
+    # x - v0 = b1 e1 + b2 e2: b1 = (q x e2) . c / |c|^2, b2 = (e1 x q) . c / |c|^2.
+    return True, dot(cross(q, e2), c) / area2, dot(cross(e1, q), c) / area2
+
+
+@jit
 def shading_normal(corner_normals, hit_table, first_sphere: int, p: int, x, face_normal):
     """The unit shading normal at point ``x`` of primitive ``p``: for a triangle with vertex
     normals (a nonzero row of ``corner_normals``, (F, 9)), their interpolation by x's
@@ -99,16 +114,9 @@ def shading_normal(corner_normals, hit_table, first_sphere: int, p: int, x, face
     n2 = (corner_normals[p, 6], corner_normals[p, 7], corner_normals[p, 8])
     if dot(n0, n0) == 0.0 or dot(n1, n1) == 0.0 or dot(n2, n2) == 0.0:
         return face_normal
-    e1 = (hit_table[p, 3], hit_table[p, 4], hit_table[p, 5])
-    e2 = (hit_table[p, 6], hit_table[p, 7], hit_table[p, 8])
-    q = (x[0] - hit_table[p, 0], x[1] - hit_table[p, 1], x[2] - hit_table[p, 2])
-    c = cross(e1, e2)
-    area2 = dot(c, c)
-    if area2 == 0.0:
+    found, b1, b2 = barycentrics(hit_table, p, x)
+    if not found:
         return face_normal
-    # x - v0 = b1 e1 + b2 e2: b1 = (q x e2) . c / |c|^2, b2 = (e1 x q) . c / |c|^2.
-    b1 = dot(cross(q, e2), c) / area2
-    b2 = dot(cross(e1, q), c) / area2
     b0 = 1.0 - b1 - b2
     n = (b0 * n0[0] + b1 * n1[0] + b2 * n2[0], b0 * n0[1] + b1 * n1[1] + b2 * n2[1],
          b0 * n0[2] + b1 * n1[2] + b2 * n2[2])

@@ -81,7 +81,8 @@ class DirectLighting:
         self.surfaces = Surfaces(np.ascontiguousarray(scene.hit_table), np.ascontiguousarray(m.kind),
                                  np.ascontiguousarray(m.params, dtype=np.float64),
                                  np.ascontiguousarray(m.twosided, dtype=np.bool_), float(scene.ray_epsilon),
-                                 int(scene.triangle_count), np.ascontiguousarray(scene.corner_normals))
+                                 int(scene.triangle_count), np.ascontiguousarray(scene.corner_normals),
+                                 scene.textures.arrays(len(m.kind), scene.corner_uv, scene.sphere_frame))
         n_light, n_dir = strategy.light_count, strategy.direction_count
         one_sample = strategy.one_sample_mis
         total = 1.0 if one_sample else float(n_light + n_dir)
@@ -103,7 +104,7 @@ class DirectLighting:
         features = FeatureSet(materials, technique_names(self.lights.tables), strategy.light_selection,
                               sampler, strategy.direction_technique if strategy.direction_count else None,
                               self.combiner.name, bool(strategy.light_count), bool(strategy.direction_count),
-                              strategy.learns)
+                              strategy.learns, textures=bool(self.scene.textures))
         return features.widened() if shared_builds() else features
 
     def build(self, sampler: samplers.SamplerParams) -> Build:

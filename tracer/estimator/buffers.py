@@ -12,6 +12,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..textures import Textures
+
 
 class Surfaces(NamedTuple):
     """The scene as the kernels read it.
@@ -22,6 +24,8 @@ class Surfaces(NamedTuple):
     eps : ray offset along the normal (``Scene.ray_epsilon``).
     first_sphere : F, the primitive id of the first analytic sphere.
     corner_normals : (F, 9) vertex normals of smooth triangles, or (0, 9) (``Scene.corner_normals``).
+    textures : the textures and what they feed (``tracer.textures.Textures``), read where the
+        build has textures (``FeatureSet.textures``).
     """
 
     hit_table: np.ndarray
@@ -31,6 +35,7 @@ class Surfaces(NamedTuple):
     eps: float
     first_sphere: int
     corner_normals: np.ndarray
+    textures: Textures
 
 
 class Plan(NamedTuple):

@@ -22,18 +22,21 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .. import lights, mis, tuning
 from ..frame import add_scaled, normalized, sub
 from ..geometry import offset_origin
 from ..jit import jit
 from ..kernels import UNBOUND, kernel
 from ..samplers import dimensions
+from ..textures import lookup
 from . import light_samples, shading_point
 from .combiners import ris
 from .direction_samples import direction_arrays, direction_sample, direction_value
 
 # Bound per build (``tracer.kernels.dispatch``): what the render takes and does.
-LIGHT_SAMPLES = DIRECTION_SAMPLES = LEARNS = RESAMPLES = False
+LIGHT_SAMPLES = DIRECTION_SAMPLES = LEARNS = RESAMPLES = TEXTURES = False
 
 
 @kernel
@@ -49,6 +52,9 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
     hit_table, kinds, params, eps = (surfaces.hit_table, surfaces.material_kind, surfaces.material_params,
                                      surfaces.eps)
     first_sphere, twosided, corner_normals = surfaces.first_sphere, surfaces.twosided, surfaces.corner_normals
+    textures = surfaces.textures
+    # A textured hit's material row, its textured columns set for that hit (``tracer.textures``).
+    scratch = np.empty((1, params.shape[1]))
     spheres = light_tables.spheres
     weight_sum, u_left = reservoirs.weight, reservoirs.u
     shadow_origin, shadow_dir, shadow_tmax = shadow.origin, shadow.dir, shadow.tmax
@@ -91,6 +97,10 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
         if not reflects:
             continue
         point = (x, geometric, normal, s, t, wo)
+        here = params
+        if TEXTURES:
+            here, material = lookup.textured_row(textures, params, material, hit_table, first_sphere, p, x,
+                                                 scratch)
         surface = (kind, material)
         state = dispatch.start(sampler, pixel[lane], sample[lane])
         if RESAMPLES:
@@ -105,7 +115,7 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
         if LIGHT_SAMPLES:
             for j in range(lights_here):
                 wi_world, dist, value, raw, w_balance, share_t = light_samples.light_sample(
-                    j, sampler, state, selection, technique, light_rows, params, plan, point, surface,
+                    j, sampler, state, selection, technique, light_rows, here, plan, point, surface,
                     (own_light, own_dir))
                 # A sample that cannot contribute casts no ray. Learning looks at the unweighted
                 # value: whether a sample carries light must not depend on the heuristic (max's
@@ -137,7 +147,7 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
         # hits and the MIS weight.
         if DIRECTION_SAMPLES:
             for j in range(dirs_here):
-                wi_world, value, pdf_dir, delta = direction_sample(j, sampler, state, params, plan, point,
+                wi_world, value, pdf_dir, delta = direction_sample(j, sampler, state, here, plan, point,
                                                                    surface, own_dir)
                 if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
                     _flag_nan(radiance, lane, value)

@@ -38,6 +38,7 @@ class FeatureSet:
     direction : the direction technique, None without direction samples.   combiner : one.
     light_samples, direction_samples : the strategy takes samples of that technique.
     learns : the estimator learns between passes (``tracer.tuning``).
+    textures : some material parameter of the scene is textured (``tracer.textures``).
     shared : a build that renders of many scenes share (``widened``): every material and
         technique, each called rather than inlined, so that all such builds link one compiled
         copy of each instead of compiling them into every kernel.
@@ -53,6 +54,7 @@ class FeatureSet:
     direction_samples: bool
     learns: bool
     shared: bool = False
+    textures: bool = False
 
     @property
     def key(self) -> str:
@@ -76,7 +78,8 @@ class FeatureSet:
         selection = plugins.get("light_selection", self.light_selection)
         return {"LIGHT_SAMPLES": self.light_samples, "DIRECTION_SAMPLES": self.direction_samples,
                 "LEARNS": self.learns, "RESAMPLES": plugins.get("combiner", self.combiner).resamples,
-                "PER_POINT_SELECTION": bool(getattr(selection, "per_point", False))}
+                "PER_POINT_SELECTION": bool(getattr(selection, "per_point", False)),
+                "TEXTURES": self.textures}
 
     def without(self, fields: tuple[str, ...]) -> "FeatureSet":
         """This feature set with ``fields`` at fixed defaults (no materials or techniques, the
@@ -86,7 +89,7 @@ class FeatureSet:
 
         defaults = {"materials": (), "light_techniques": (), "light_selection": "power",
                     "sampler": "independent", "direction": None, "combiner": "sum", "light_samples": False,
-                    "direction_samples": False, "learns": False}
+                    "direction_samples": False, "learns": False, "textures": False}
         unknown = set(fields) - set(defaults)
         if unknown:
             raise ValueError(f"no feature-set field {sorted(unknown)[0]!r} to ignore")
@@ -98,7 +101,7 @@ class FeatureSet:
         from dataclasses import replace
 
         return replace(self, materials=plugins.names("material"),
-                       light_techniques=plugins.names("light_technique"), shared=True)
+                       light_techniques=plugins.names("light_technique"), shared=True, textures=True)
 
     def describe(self) -> str:
         """One line of what is compiled: ``diffuse, roughconductor; triangle_area; power; ...``."""
@@ -107,6 +110,8 @@ class FeatureSet:
                  f"{self.combiner}" + (f" with {self.direction} directions" if self.direction else "")]
         if self.learns:
             parts.append("learning")
+        if self.textures:
+            parts.append("textures")
         return "; ".join(parts)
 
 

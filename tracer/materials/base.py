@@ -46,6 +46,8 @@ class Param:
         0.0, 1.0, ...); the default is then a name.   boolean : given as true or false, held as
         1.0 or 0.0.   late : added to the type after scene digests were first written; a scene
         that leaves it at its default keeps the digest it had (``MaterialTable.digest_params``).
+        texture : a scene may give a texture for it (``tracer.textures``): its kernels read it
+        per hit, and no derived column depends on it except through its mean.
     """
 
     name: str
@@ -58,6 +60,7 @@ class Param:
     choices: tuple[str, ...] = ()
     boolean: bool = False
     late: bool = False
+    texture: bool = False
 
     def check(self, value: object) -> None:
         """Raise ValueError unless ``value`` (a number, or ``size`` numbers) is finite and within

@@ -26,11 +26,13 @@ CODE = 4  # the dispatch code (``tracer.materials``)
 # to within 4e-3 at every angle; the Fresnel term stays finite to about 1e10 (measured), so every
 # accepted value renders.
 MAX_INDEX = 1000.0
-ETA_PARAM = Param("eta", 3, lo=0.0, hi=MAX_INDEX, default=0.0, doc="real part of the complex index of refraction")
-K_PARAM = Param("k", 3, lo=0.0, hi=MAX_INDEX, default=1.0, doc="imaginary part of the complex index of refraction")
+ETA_PARAM = Param("eta", 3, lo=0.0, hi=MAX_INDEX, default=0.0,
+                  texture=True, doc="real part of the complex index of refraction")
+K_PARAM = Param("k", 3, lo=0.0, hi=MAX_INDEX, default=1.0,
+                texture=True, doc="imaginary part of the complex index of refraction")
 TYPE = register(MaterialType(module=__name__, rank=CODE, name=
     "conductor", code=CODE, lobes=DELTA, doc="smooth metal: specular reflection times conductor Fresnel",
-    params=(Param("reflectance", 3, lo=0.0, hi=1.0, default=1.0, doc="scale per channel"),
+    params=(Param("reflectance", 3, lo=0.0, hi=1.0, default=1.0, texture=True, doc="scale per channel"),
             ETA_PARAM, K_PARAM)))
 REFLECTANCE, ETA, K = TYPE.column("reflectance"), TYPE.column("eta"), TYPE.column("k")
 

@@ -17,7 +17,8 @@ from .base import DIFFUSE, MaterialType, Param, rgb
 CODE = 1  # the dispatch code (``tracer.materials``)
 TYPE = register(MaterialType(module=__name__, rank=CODE, name="diffuse", code=CODE, lobes=DIFFUSE,
                     doc="Lambertian: f = reflectance / pi",
-                    params=(Param("reflectance", 3, lo=0.0, hi=1.0, doc="albedo per channel"),)))
+                    params=(Param("reflectance", 3, lo=0.0, hi=1.0,
+                                  texture=True, doc="albedo per channel"),)))
 REFLECTANCE = TYPE.column("reflectance")
 
 

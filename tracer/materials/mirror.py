@@ -19,7 +19,8 @@ from .base import DELTA, MaterialType, Param, rgb
 CODE = 3  # the dispatch code (``tracer.materials``)
 TYPE = register(MaterialType(module=__name__, rank=CODE, name="mirror", code=CODE, lobes=DELTA,
                     doc="ideal specular reflection (delta)",
-                    params=(Param("reflectance", 3, lo=0.0, hi=1.0, doc="reflectance per channel"),)))
+                    params=(Param("reflectance", 3, lo=0.0, hi=1.0,
+                                  texture=True, doc="reflectance per channel"),)))
 REFLECTANCE = TYPE.column("reflectance")
 
 

@@ -45,8 +45,9 @@ CODE = 5  # the dispatch code (``tracer.materials``)
 MIN_IOR, MAX_IOR = 0.01, 100.0
 # Mitsuba 3's defaults: polypropylene inside, air outside.
 COATING_PARAMS = (
-    Param("diffuse_reflectance", 3, lo=0.0, hi=1.0, default=0.5, doc="base albedo per channel"),
-    Param("specular_reflectance", 3, lo=0.0, hi=1.0, default=1.0, doc="coating reflection scale"),
+    Param("diffuse_reflectance", 3, lo=0.0, hi=1.0, default=0.5, texture=True, doc="base albedo per channel"),
+    Param("specular_reflectance", 3, lo=0.0, hi=1.0, default=1.0,
+          texture=True, doc="coating reflection scale"),
     Param("int_ior", 1, lo=MIN_IOR, hi=MAX_IOR, default=1.49, doc="index inside the coating"),
     Param("ext_ior", 1, lo=MIN_IOR, hi=MAX_IOR, default=1.000277, doc="index outside"),
     Param("nonlinear", 1, default=False, boolean=True, doc="colour shift of internal bounces"),

@@ -29,8 +29,9 @@ from .conductor import ETA_PARAM, K_PARAM, fresnel_rgb
 CODE = 2  # the dispatch code (``tracer.materials``)
 TYPE = register(MaterialType(module=__name__, rank=CODE, name=
     "roughconductor", code=CODE, lobes=GLOSSY, doc="microfacet metal (GGX or Beckmann), conductor Fresnel",
-    params=(Param("reflectance", 3, lo=0.0, hi=1.0, doc="scale per channel"),
-            Param("alpha", 1, lo=microfacet.MIN_ALPHA, hi=microfacet.MAX_ALPHA, doc="roughness, used as given"),
+    params=(Param("reflectance", 3, lo=0.0, hi=1.0, texture=True, doc="scale per channel"),
+            Param("alpha", 1, lo=microfacet.MIN_ALPHA, hi=microfacet.MAX_ALPHA,
+                  texture=True, doc="roughness, used as given"),
             replace(ETA_PARAM, late=True), replace(K_PARAM, late=True),
             Param("distribution", 1, default="ggx", choices=microfacet.DISTRIBUTIONS, late=True,
                   doc="microfacet distribution"))))

@@ -42,13 +42,14 @@ class Mesh:
     vertices : (V, 3) float64.   faces : (F, 3) int64 indices into vertices.
     normals : (V, 3) float64 unit vertex normals from the file (normalized unless unit already),
         or None if it has none.
-    uv : (V, 2) float64 texture coordinates from the file, or None if it has none.
+    corner_uv : (F, 6) float64 texture coordinates (u, v) of each triangle's three corners as
+        the file gives them, or None if it has none.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     normals: np.ndarray | None = None
-    uv: np.ndarray | None = None
+    corner_uv: np.ndarray | None = None
 
 
 def import_trimesh():
@@ -83,19 +84,19 @@ def read_mesh_file(mesh_path: Path) -> Mesh:
         # an overflow warning on stderr. The checks below refuse what it became, in one line.
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)
-            vertices, faces, normals = _load(trimesh, mesh_path)
+            vertices, faces, normals, corner_uv = _load(trimesh, mesh_path)
     except MeshError:
         raise
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise MeshError(f"cannot read mesh {mesh_path}: {exc}") from None
-    return checked(mesh_path, Mesh(vertices, faces, normals))
+    return checked(mesh_path, Mesh(vertices, faces, normals, corner_uv))
 
 
 def checked(mesh_path: Path, mesh: Mesh) -> Mesh:
     """``mesh`` with its normals made unit, once its arrays are checked: 3-D finite vertices in
     range, face indices among them, one finite nonzero normal (and uv pair) per used vertex.
     Raises MeshError naming ``mesh_path``."""
-    vertices, faces, normals, uv = mesh.vertices, mesh.faces, mesh.normals, mesh.uv
+    vertices, faces, normals, corner_uv = mesh.vertices, mesh.faces, mesh.normals, mesh.corner_uv
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
         raise MeshError(f"{mesh_path} holds no faces (triangles or polygons)")
     if vertices.ndim != 2 or vertices.shape[1] != 3:
@@ -124,16 +125,18 @@ def checked(mesh_path: Path, mesh: Mesh) -> Mesh:
         renormalize = np.abs(length - 1.0) > UNIT_TOLERANCE
         unit = normals / np.where(length > 0.0, length, 1.0)[:, None]
         normals = np.where(renormalize[:, None], unit, normals)
-    if uv is not None and (uv.shape != (len(vertices), 2) or not np.all(np.isfinite(uv))):
-        raise MeshError(f"{mesh_path} has texture coordinates that are not one finite pair per vertex")
-    return Mesh(vertices, faces, normals, uv)
+    if corner_uv is not None and (corner_uv.shape != (len(faces), 6) or not np.all(np.isfinite(corner_uv))):
+        raise MeshError(f"{mesh_path} has texture coordinates that are not finite pairs, one per corner")
+    return Mesh(vertices, faces, normals, corner_uv)
 
 
-def _load(trimesh, mesh_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Vertices, faces and file normals (or None). trimesh's ``load_mesh`` drops the normals a
+def _load(trimesh, mesh_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Vertices, faces, file normals (or None) and corner texture coordinates (or None).
+    trimesh's ``load_mesh`` drops the normals a
     file holds (its cache is reset after loading), so PLY and OBJ go through trimesh's
     format readers, whose output keeps them; other formats have none we read."""
     suffix = mesh_path.suffix.lower()
+    text = None
     if suffix == ".ply":
         with open(mesh_path, "rb") as fh:
             parts = [trimesh.exchange.ply.load_ply(fh)]
@@ -146,20 +149,30 @@ def _load(trimesh, mesh_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray 
         mesh = trimesh.load_mesh(str(mesh_path), process=False)
         if not isinstance(mesh, trimesh.Trimesh):
             raise MeshError(f"{mesh_path} holds no triangle mesh")
-        return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), None
+        return (np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), None,
+                None)
     if not parts:
         raise MeshError(f"{mesh_path} holds no triangle mesh")
-    vertices, faces, normals, offset = [], [], [], 0
+    vertices, faces, normals, corner_uv, offset = [], [], [], [], 0
     for part in parts:
         v = np.asarray(part.get("vertices", np.zeros((0, 3))), dtype=np.float64).reshape(-1, 3)
-        f = np.asarray(part.get("faces", np.zeros((0, 3))), dtype=np.int64)
+        f = fan_triangles(np.asarray(part.get("faces", np.zeros((0, 3))), dtype=np.int64).reshape(
+            -1, part["faces"].shape[-1] if np.ndim(part.get("faces")) == 2 else 3))
         n = part.get("vertex_normals")
+        uv = getattr(part.get("visual"), "uv", None)
         vertices.append(v)
-        faces.append(fan_triangles(f.reshape(-1, f.shape[-1] if f.ndim == 2 else 3)) + offset)
+        faces.append(f + offset)
         normals.append(None if n is None else np.asarray(n, dtype=np.float64).reshape(-1, 3))
+        corner_uv.append(None if uv is None or len(uv) != len(v)
+                         else np.asarray(uv, dtype=np.float64)[f].reshape(-1, 6))
         offset += len(v)
     all_normals = None if any(n is None for n in normals) else np.concatenate(normals)
-    return np.concatenate(vertices), np.concatenate(faces), all_normals
+    vertices, faces = np.concatenate(vertices), np.concatenate(faces)
+    if text is not None:  # an OBJ's coordinates belong to its face corners: read from its text
+        uv = _obj_corner_uv(text, vertices[faces], mesh_path)
+    else:
+        uv = None if any(c is None for c in corner_uv) else np.concatenate(corner_uv)
+    return vertices, faces, all_normals, uv
 
 
 def fan_triangles(faces: np.ndarray) -> np.ndarray:
@@ -190,6 +203,43 @@ def _fan_triangulated_obj(text: str) -> str:
             first = tokens[1]
             lines[i] = "\n".join(f"f {first} {a} {b}" for a, b in zip(tokens[2:-1], tokens[3:], strict=True))
     return "\n".join(lines)
+
+
+def _obj_corner_uv(text: str, corners: np.ndarray, mesh_path: Path) -> np.ndarray | None:
+    """(F, 6) texture coordinates of an OBJ's triangle corners, or None if it has none: each
+    face corner's ``vt`` index (1-based, or negative: counted back from the latest), read from
+    the text, since trimesh keeps one coordinate per vertex and an OBJ vertex may have several
+    (a seam). A corner without one gets (0, 0). The faces are those trimesh read, in order:
+    checked against ``corners`` (F, 3, 3), their positions."""
+    positions: list[list[float]] = []
+    coordinates: list[list[float]] = []
+    position_index: list[int] = []
+    uv_index: list[int] = []
+    for line in text.split("\n"):
+        tokens = line.split()
+        if not tokens:
+            continue
+        if tokens[0] == "v" and len(tokens) >= 4:
+            positions.append([float(t) for t in tokens[1:4]])
+        elif tokens[0] == "vt" and len(tokens) >= 3:
+            coordinates.append([float(t) for t in tokens[1:3]])
+        elif tokens[0] == "f" and len(tokens) == 4:
+            for corner in tokens[1:]:
+                fields = corner.split("/")
+                p, t = int(fields[0]), int(fields[1]) if len(fields) > 1 and fields[1] else 0
+                position_index.append(p - 1 if p > 0 else len(positions) + p)
+                uv_index.append(-1 if t == 0 else (t - 1 if t > 0 else len(coordinates) + t))
+    if not coordinates or not uv_index:
+        return None
+    ours = np.asarray(positions, dtype=np.float64)[np.asarray(position_index)].reshape(-1, 3, 3)
+    if ours.shape != corners.shape or not np.array_equal(ours, corners):
+        raise MeshError(f"{mesh_path}: its texture coordinates could not be matched to its faces "
+                        "(convert it to PLY)")
+    table = np.concatenate([np.asarray(coordinates, dtype=np.float64), np.zeros((1, 2))])
+    index = np.asarray(uv_index)
+    if index.max() >= len(coordinates) or index.min() < -1:
+        raise MeshError(f"{mesh_path} has a face corner whose texture coordinate index is out of range")
+    return table[index].reshape(-1, 6)
 
 
 def angle_weighted_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

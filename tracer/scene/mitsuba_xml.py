@@ -28,6 +28,8 @@ from ..camera import Camera
 from ..errors import InputError, one_line, shown
 from ..materials import conductor, plastic
 from ..record import MAX_SAMPLE_INDEX
+from ..textures import FILTERS, WRAPS, Binding, Texture
+from ..textures.bitmap import read_texels
 from . import spectrum
 from .mesh import MeshError, angle_weighted_normals, read_mesh_file
 from .mitsuba_document import (
@@ -74,8 +76,6 @@ _MITSUBA_BSDFS = _READ_BSDFS | _DIELECTRICS | frozenset({
     "blendbsdf", "bumpmap", "circular", "hair", "mask", "measured", "measured_polarized", "normalmap",
     "null", "polarizer", "pplastic", "principled", "principledthin", "retarder"})
 _UNSUPPORTED_ANYWHERE = {
-    "texture": "textures are not supported (tracer reads constant colours: give an <rgb>, <float> or "
-               "<spectrum>)",
     "medium": "participating media are not supported (tracer renders surfaces in vacuum)",
     "phase": "participating media are not supported (tracer renders surfaces in vacuum)",
     "volume": "participating media are not supported (tracer renders surfaces in vacuum)",
@@ -265,6 +265,8 @@ class _SceneReader:
         self.intensities: list[np.ndarray] = []
         self.render: dict[str, Any] = {}
         self.default_row: int | None = None
+        self.textures_read: dict[int, Texture] = {}  # by the id of the texture's element
+        self.images: dict[tuple[str, bool], np.ndarray] = {}  # texels by (file, raw)
 
     def plugin(self, element: Element) -> _Plugin:
         return _Plugin(self.document, element, self.notes)
@@ -272,7 +274,7 @@ class _SceneReader:
     def read(self) -> Scene:
         root = self.document.root
         _refuse_unsupported(root)
-        sensors, declared_bsdfs, declared_emitters = [], [], []
+        sensors, declared_bsdfs, declared_emitters, declared_textures = [], [], [], []
         for child in root.children:
             if child.tag == "sensor":
                 sensors.append(child)
@@ -291,6 +293,8 @@ class _SceneReader:
                 self.notes.append(f"{child.where}: a <sampler> outside the <sensor> (Mitsuba ignores it too)")
             elif child.tag in ("film", "rfilter") and "id" in child.attrs:
                 pass  # a declaration, read where a sensor refers to it
+            elif child.tag == "texture":
+                declared_textures.append(child)
             elif child.tag in PROPERTY_TAGS:
                 child.fail("a property directly inside <scene> (properties belong inside an object)")
             elif child.tag == "ref":
@@ -303,6 +307,8 @@ class _SceneReader:
         for element in declared_emitters:
             if id(element) not in self.emitter_owner:
                 self.area_radiance(element)
+        for element in declared_textures:  # checked as Mitsuba builds them, used or not
+            self.texture(element, "reflectance")
         if not sensors:
             root.fail("no <sensor>: tracer needs a camera (a perspective sensor)")
         if len(sensors) > 1:
@@ -483,16 +489,24 @@ class _SceneReader:
             corners = np.stack([origin, origin + e1, origin + e1 + e2, origin + e2])
             _check_range(p, corners)
             p.done()
-            self.geometry.add("quad", {"origin": origin, "edge1": e1, "edge2": e2}, corners,
-                              np.array([[0, 1, 2], [0, 2, 3]]), material, emission)
+            # Mitsuba's (u, v) on a rectangle: ((x + 1) / 2, (y + 1) / 2) of the local point.
+            uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+            if mirrored != flip:
+                uv = uv[:, ::-1]
+            faces = np.array([[0, 1, 2], [0, 2, 3]])
+            self.geometry.add("quad", {"origin": origin, "edge1": e1, "edge2": e2}, corners, faces, material,
+                              emission, corner_uv=uv[faces].reshape(-1, 6))
             return
-        vertices, faces = _unit_cube() if kind == "cube" else _unit_disk()
-        vertices = _apply(matrix, vertices)
+        local, faces = _unit_cube() if kind == "cube" else _unit_disk()
+        corner_uv = _cube_uv(local, faces) if kind == "cube" else _disk_uv(local, faces)
+        vertices = _apply(matrix, local)
         _check_range(p, vertices)
         if mirrored != flip:  # Mitsuba's cube and disk face along their normal transform
             faces = faces[:, ::-1]
+            corner_uv = corner_uv.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 6)
         p.done()
-        self.geometry.add("mesh", {"file": description}, vertices, faces, material, emission)
+        self.geometry.add("mesh", {"file": description}, vertices, faces, material, emission,
+                          corner_uv=corner_uv)
 
     def sphere(self, p: _Plugin, matrix: np.ndarray, flip: bool, mirrored: bool, material: int,
                emission: np.ndarray) -> None:
@@ -516,7 +530,9 @@ class _SceneReader:
             p.fail(f"radius {radius:g} is out of range (at most {MAX_COORDINATE:g}, and at least 1e-6 times "
                    "the largest centre coordinate, what float32 resolves there)")
         p.done()
-        self.geometry.add_sphere({"center": center, "radius": radius}, material, emission)
+        # Mitsuba's spherical (u, v) are taken in the sphere's own frame: to_world's rotation.
+        frame = (linear / math.sqrt(scale2)).T
+        self.geometry.add_sphere({"center": center, "radius": radius}, material, emission, frame)
 
     def mesh(self, p: _Plugin, matrix: np.ndarray, flip: bool, mirrored: bool, material: int,
              emission: np.ndarray) -> None:
@@ -528,8 +544,10 @@ class _SceneReader:
         try:
             if p.type == "serialized":
                 mesh = read_serialized(path, p.integer("shape_index", 0, 0, 2**31 - 1))
+                flip_v = False
             else:
-                p.boolean("flip_tex_coords", True)  # texture coordinates: nothing tracer reads
+                # Mitsuba's OBJ loader turns v to 1 - v unless told not to; its PLY loader does not.
+                flip_v = p.boolean("flip_tex_coords", p.type == "obj")
                 mesh = read_mesh_file(path)
         except MeshError as exc:
             (p.props.get("filename") or p.element).fail(str(exc), p.element)
@@ -551,8 +569,16 @@ class _SceneReader:
             normals = angle_weighted_normals(vertices, faces)
         if normals is not None:
             normals = unit_rows(normals)
+        corner_uv = mesh.corner_uv
+        if corner_uv is not None:
+            if flip_v:
+                corner_uv = corner_uv.copy()
+                corner_uv[:, 1::2] = 1.0 - corner_uv[:, 1::2]
+            if flip != (mirrored and file_normals):  # the corners were turned with the winding
+                corner_uv = corner_uv.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 6)
         p.done()
-        self.geometry.add("mesh", {"file": str(path)}, vertices, faces, material, emission, normals)
+        self.geometry.add("mesh", {"file": str(path)}, vertices, faces, material, emission, normals,
+                          corner_uv)
 
     def shape_material(self, p: _Plugin) -> tuple[int, np.ndarray]:
         """The material row and emission of a shape, from its bsdf and emitter (nested or
@@ -688,6 +714,97 @@ class _SceneReader:
         self.rows[key] = row
         return row
 
+    def texture(self, element: Element, kind: str) -> Texture:
+        """The texture ``element`` (read once: references share it); ``kind`` as for colours."""
+        known = self.textures_read.get(id(element))
+        if known is not None:
+            return known
+        p = self.plugin(element)
+        to_uv = p.transform("to_uv")
+        if p.type == "checkerboard":
+            texture = Texture("checkerboard", color0=p.color("color0", 0.4, kind),
+                              color1=p.color("color1", 0.2, kind), source=element.where)
+        elif p.type == "bitmap":
+            name = p.string("filename", None)
+            if name is None:
+                p.fail("missing property 'filename'")
+            raw = p.boolean("raw", False)
+            filter_type = p.string("filter_type", "bilinear")
+            wrap = p.string("wrap_mode", "repeat")
+            for key, value, allowed in (("filter_type", filter_type, FILTERS), ("wrap_mode", wrap, WRAPS)):
+                if value not in allowed:
+                    p.props[key].fail(f"{key}: expected {' or '.join(allowed)}, got '{shown(value)}'",
+                                      element)
+            fmt = p.string("format", "auto")  # storage precision: the values are the same
+            if fmt not in ("auto", "variant", "float16", "fp16", "uint8"):
+                p.props["format"].fail("format: expected auto, variant, float16 or uint8, got "
+                                       f"'{shown(fmt)}'", element)
+            path = self.document.find_file(name)
+            where = (p.props.get("filename") or element).where
+            key = (str(path), raw)
+            if key not in self.images:
+                self.images[key] = read_texels(path, raw, where)
+            texture = Texture("bitmap", pixels=self.images[key], filter=filter_type, wrap=wrap,
+                              source=str(path), raw=raw)
+        else:
+            p.fail(f"texture '{shown(p.type)}' is not supported; tracer reads bitmap and checkerboard")
+        if to_uv is not None:
+            texture.to_uv = np.array([[to_uv[0, 0], to_uv[0, 1], to_uv[0, 3]],
+                                      [to_uv[1, 0], to_uv[1, 1], to_uv[1, 3]]])
+            if not np.all(np.isfinite(texture.to_uv)):
+                p.props["to_uv"].fail("to_uv: numbers must be finite", element)
+        p.done()
+        self.textures_read[id(element)] = texture
+        return texture
+
+    def textured(self, p: _Plugin, name: str, read: Callable[[], object], kind: str) -> object:
+        """The texture ``p`` gives for property ``name`` (nested, or referenced with that name),
+        else what ``read`` reads (a constant)."""
+        found = [(obj, written) for obj, written in p.objects
+                 if obj.tag == "texture" and written.attrs.get("name") == name]
+        if not found:
+            return read()
+        if p.has(name) or len(found) > 1:
+            again = found[1][1] if len(found) > 1 else found[0][1]
+            again.fail(f"property '{name}' is given twice", p.element)
+        p.taken.add(id(found[0][1]))
+        return self.texture(found[0][0], kind)
+
+    def colour(self, p: _Plugin, name: str, default: float, kind: str, hi: float | None = None) -> object:
+        """A colour property that may be a texture (``textured``)."""
+        return self.textured(p, name, lambda: p.color(name, default, kind, hi=hi), kind)
+
+    def bind_textures(self, row: int, type_name: str, values: dict[str, object]) -> dict[str, object]:
+        """``values`` with each texture replaced by its mean, the texture bound to the parameter
+        in the geometry's texture table (``tracer.textures``)."""
+        if not any(isinstance(v, Texture) for v in values.values()):
+            return values
+        kind = materials.TYPES[type_name]
+        table = self.geometry.textures
+        out = dict(values)
+        for param in kind.params:
+            texture = values.get(param.name)
+            if not isinstance(texture, Texture):
+                continue
+            if not param.texture:
+                raise InputError(f"{type_name}'s {param.name} cannot be a texture ({texture.source})",
+                                 self.document.path)
+            lo = -math.inf if param.lo is None else param.lo
+            hi = math.inf if param.hi is None else param.hi
+            low, high = texture.value_range()
+            if low < lo or high > hi:
+                self.notes.append(f"{texture.source}: the texture's values ({low:.4g} .. {high:.4g}) are "
+                                  f"clamped into {param.name}'s range ({lo:g} .. {hi:g})")
+            index = next((i for i, t in enumerate(table.textures) if t is texture), None)
+            if index is None:
+                index = table.add(texture)
+            table.bindings.append(Binding(row, param.name, kind.column(param.name), param.size, index,
+                                          lo, hi))
+            out[param.name] = np.clip(texture.mean(param.size), lo, hi)
+            if param.size == 1:
+                out[param.name] = float(out[param.name][0])
+        return out
+
     def unique(self, name: str) -> str:
         candidate, i = name, 2
         while candidate in self.names or (candidate != name and candidate in self.document.ids):
@@ -706,19 +823,21 @@ class _SceneReader:
         if kind in _DIELECTRICS:
             p.fail(_DIELECTRIC.format(kind=kind))
         if kind == "diffuse":
-            values: dict[str, object] = {"reflectance": p.color("reflectance", 0.5, "reflectance", hi=1.0)}
+            values: dict[str, object] = {
+                "reflectance": self.colour(p, "reflectance", 0.5, "reflectance", hi=1.0)}
         elif kind in ("conductor", "roughconductor"):
             eta, k = self.conductor_ior(p)
-            values = {"reflectance": p.color("specular_reflectance", 1.0, "reflectance", hi=1.0),
+            values = {"reflectance": self.colour(p, "specular_reflectance", 1.0, "reflectance", hi=1.0),
                       "eta": eta, "k": k}
             if kind == "roughconductor":
                 values.update(self.roughness(p))
         elif kind in ("plastic", "roughplastic"):
-            values = {"diffuse_reflectance": p.color("diffuse_reflectance", 0.5, "reflectance", hi=1.0),
-                      "specular_reflectance": p.color("specular_reflectance", 1.0, "reflectance", hi=1.0),
-                      "int_ior": self.ior(p, "int_ior", "polypropylene"),
-                      "ext_ior": self.ior(p, "ext_ior", "air"),
-                      "nonlinear": p.boolean("nonlinear", False)}
+            values = {
+                "diffuse_reflectance": self.colour(p, "diffuse_reflectance", 0.5, "reflectance", hi=1.0),
+                "specular_reflectance": self.colour(p, "specular_reflectance", 1.0, "reflectance", hi=1.0),
+                "int_ior": self.ior(p, "int_ior", "polypropylene"),
+                "ext_ior": self.ior(p, "ext_ior", "air"),
+                "nonlinear": p.boolean("nonlinear", False)}
             if kind == "roughplastic":
                 values.update(self.roughness(p))
         else:
@@ -734,8 +853,8 @@ class _SceneReader:
         if name is not None and (p.has("eta") or p.has("k")):
             p.fail("give material or eta and k, not both")
         if name is None or name == "none":
-            return (p.color("eta", 0.0, "other", hi=conductor.MAX_INDEX),
-                    p.color("k", 1.0, "other", hi=conductor.MAX_INDEX))
+            return (self.colour(p, "eta", 0.0, "other", hi=conductor.MAX_INDEX),
+                    self.colour(p, "k", 1.0, "other", hi=conductor.MAX_INDEX))
         from ..materials.presets import CONDUCTORS
 
         if name not in CONDUCTORS:
@@ -772,21 +891,32 @@ class _SceneReader:
         if distribution not in ("beckmann", "ggx"):
             p.props["distribution"].fail("distribution: expected beckmann or ggx, got "
                                          f"'{shown(distribution)}'", p.element)
-        if p.has("alpha_u") or p.has("alpha_v"):
-            if p.has("alpha"):
+        def given(name: str) -> bool:
+            return p.has(name) or any(obj.tag == "texture" and written.attrs.get("name") == name
+                                      for obj, written in p.objects)
+
+        if given("alpha_u") or given("alpha_v"):
+            if given("alpha"):
                 p.fail("give alpha or alpha_u and alpha_v, not both")
-            if not (p.has("alpha_u") and p.has("alpha_v")):
+            if not (given("alpha_u") and given("alpha_v")):
                 p.fail("alpha_u and alpha_v go together")
-            alpha_u, alpha_v = self.scalar(p, "alpha_u", 0.1), self.scalar(p, "alpha_v", 0.1)
-            if alpha_u != alpha_v:
+            alpha_u = self.textured(p, "alpha_u", lambda: self.scalar(p, "alpha_u", 0.1), "other")
+            alpha_v = self.textured(p, "alpha_v", lambda: self.scalar(p, "alpha_v", 0.1), "other")
+            if isinstance(alpha_u, Texture) or isinstance(alpha_v, Texture):
+                if alpha_u is not alpha_v:
+                    p.fail("anisotropic roughness (alpha_u and alpha_v from textures) is not supported: "
+                           "tracer's microfacet materials are isotropic")
+            elif alpha_u != alpha_v:
                 p.fail(f"anisotropic roughness (alpha_u {alpha_u:g}, alpha_v {alpha_v:g}) is not supported: "
                        "tracer's microfacet materials are isotropic")
             alpha = alpha_u
         else:
-            alpha = self.scalar(p, "alpha", 0.1)
+            alpha = self.textured(p, "alpha", lambda: self.scalar(p, "alpha", 0.1), "other")
         if not p.boolean("sample_visible", True):
             self.notes.append(f"{p.element.where}: sample_visible false (tracer samples visible normals)")
-        return {"distribution": distribution, "alpha": max(alpha, MIN_ALPHA)}
+        # A textured alpha is clamped per lookup, into the parameter's range (tracer.textures).
+        return {"distribution": distribution,
+                "alpha": alpha if isinstance(alpha, Texture) else max(alpha, MIN_ALPHA)}
 
     @staticmethod
     def scalar(p: _Plugin, name: str, default: float) -> float:
@@ -800,8 +930,10 @@ class _SceneReader:
 
     def scene(self, camera: Camera) -> Scene:
         g = self.geometry
+        triples = [(name, type_name, self.bind_textures(row, type_name, values))
+                   for row, (name, type_name, values) in enumerate(self.triples, start=1)]
         try:
-            table = materials.table(self.triples, self.sides)
+            table = materials.table(triples, self.sides)
         except ValueError as exc:  # the parameter ranges every reader is held to (Param.check)
             raise InputError(str(exc), self.document.path) from None
         return g.scene(self.document.path, camera, table, self.positions, self.intensities, self.render)
@@ -861,6 +993,53 @@ def _unit_cube() -> tuple[np.ndarray, np.ndarray]:
                       [0, 4, 6], [0, 6, 2],   # x = -1
                       [1, 3, 7], [1, 7, 5]])  # x = +1
     return vertices, faces
+
+
+# Mitsuba's cube (src/shapes/cube.cpp): each face's (u, v) as affine functions of the local
+# point, by the face's outward normal axis and sign: (axis, sign) -> the coefficients of
+# (x, y, z, 1) giving u and of those giving v. Fitted (exactly: zero residual) to Mitsuba 3.9.1's
+# own cube, its vertex positions and texture coordinates, face by face.
+_CUBE_UV = {
+    (1, -1.0): ([0.0, -0.25, 0.5, 0.25], [0.5, -0.25, 0.0, 0.25]),
+    (1, 1.0): ([-0.5, 0.25, 0.0, 0.25], [0.0, 0.25, -0.5, 0.25]),
+    (0, 1.0): ([0.25, 0.5, 0.0, 0.25], [0.25, 0.0, -0.5, 0.25]),
+    (2, 1.0): ([0.0, 0.5, 0.25, 0.25], [0.5, 0.0, 0.25, 0.25]),
+    (0, -1.0): ([-0.25, 0.5, 0.0, 0.25], [-0.25, 0.0, 0.5, 0.25]),
+    (2, -1.0): ([0.0, -0.5, -0.25, 0.25], [0.5, 0.0, -0.25, 0.25]),
+}
+
+
+def _cube_uv(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 6) Mitsuba's cube texture coordinates at the corners of the unit cube's triangles."""
+    out = np.zeros((len(faces), 6))
+    for f, face in enumerate(faces):
+        corners = vertices[face]
+        axis = int(np.flatnonzero(np.all(corners == corners[0], axis=0))[0])
+        u_row, v_row = (np.array(r) for r in _CUBE_UV[(axis, float(corners[0, axis]))])
+        homogeneous = np.concatenate([corners, np.ones((3, 1))], axis=1)
+        out[f] = np.stack([homogeneous @ u_row, homogeneous @ v_row], axis=1).ravel()
+    return out
+
+
+def _disk_uv(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 6) Mitsuba's disk texture coordinates (r, φ / 2π) at the fan's corners: the centre
+    takes each triangle's middle angle, the rim corners their own (the last triangle's end at
+    φ = 2π, not 0). Interpolated over a triangle, r is off by at most 1 - cos(π / 288), 6e-5, and
+    φ / 2π by at most half a triangle's angle, 1/576 (near the centre)."""
+    out = np.zeros((len(faces), 6))
+    for f, face in enumerate(faces):
+        angles = [math.atan2(vertices[i, 1], vertices[i, 0]) % (2.0 * math.pi) for i in face]
+        rims = [k for k in range(3) if np.hypot(*vertices[face[k], :2]) > 0.5]
+        if len(rims) == 2 and abs(angles[rims[1]] - angles[rims[0]]) > math.pi:
+            for k in rims:  # the triangle across φ = 0: its corner at 0 is at 2π
+                if angles[k] < math.pi:
+                    angles[k] += 2.0 * math.pi
+        middle = float(np.mean([angles[k] for k in rims])) if rims else 0.0
+        for k, i in enumerate(face):
+            radius = float(np.hypot(*vertices[i, :2]))
+            out[f, 2 * k] = radius
+            out[f, 2 * k + 1] = (angles[k] if radius > 0.5 else middle) / (2.0 * math.pi)
+    return out
 
 
 def _unit_disk() -> tuple[np.ndarray, np.ndarray]:

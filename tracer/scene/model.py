@@ -22,6 +22,7 @@ import numpy as np
 from .. import materials
 from ..camera import Camera
 from ..materials import MaterialTable
+from ..textures import TextureTable
 
 # Offsets along the normal are this fraction of the scene's extent (see Scene.ray_epsilon).
 RELATIVE_RAY_OFFSET = 1e-5
@@ -73,6 +74,11 @@ class Scene:
     corner_normals : (F, 9) float64 unit vertex normals at each triangle's three corners, for
         smooth shading (a row of zeros: the triangle shades with its face normal); (0, 9) when
         every triangle is flat.
+    textures : the scene's textures and the material parameters they feed (``tracer.textures``).
+    corner_uv : (F, 6) float64 texture coordinates (u, v) at each triangle's corners, for
+        textured materials; (0, 6) when nothing is textured.   sphere_frame : (S, 9) each
+        analytic sphere's world-to-local rotation (rows), for its texture coordinates; (0, 9)
+        when nothing is textured.
 
     Derived on construction: ``v0, edge1, edge2, normal`` (F, 3), ``area`` (F,),
     ``hit_table`` (F + S, 16), ``ray_epsilon``.
@@ -95,6 +101,9 @@ class Scene:
     sphere_emission: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     shape_of_sphere: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int32))
     corner_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 9)))
+    textures: TextureTable = field(default_factory=TextureTable)
+    corner_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    sphere_frame: np.ndarray = field(default_factory=lambda: np.zeros((0, 9)))
 
     def __post_init__(self) -> None:
         # Vertices at float32 precision, as Embree holds them: hit points, light samples and pdfs
@@ -113,6 +122,12 @@ class Scene:
         self.corner_normals = np.ascontiguousarray(self.corner_normals, dtype=np.float64).reshape(-1, 9)
         if len(self.corner_normals) not in (0, len(self.faces)):
             raise ValueError("corner_normals needs one row per triangle, or none")
+        self.corner_uv = np.ascontiguousarray(self.corner_uv, dtype=np.float64).reshape(-1, 6)
+        self.sphere_frame = np.ascontiguousarray(self.sphere_frame, dtype=np.float64).reshape(-1, 9)
+        if len(self.corner_uv) not in (0, len(self.faces)):
+            raise ValueError("corner_uv needs one row per triangle, or none")
+        if len(self.sphere_frame) not in (0, len(self.spheres)):
+            raise ValueError("sphere_frame needs one row per sphere, or none")
         # What a hit needs, in one row per primitive so that a batch gathers it in one go:
         # triangles v0 (3), edge1 (3), edge2 (3), normal (3); spheres centre (3), radius (1),
         # zeros (5), and a zero normal, which marks the row as a sphere's; then for both
@@ -178,6 +193,10 @@ class Scene:
             add("corner_normals", self.corner_normals, "<f8")
         if not np.all(self.materials.twosided):
             add("material_twosided", self.materials.twosided, "<i1")
+        if self.textures:  # likewise: scenes without textures keep their digests
+            digest.update(self.textures.digest())
+            add("corner_uv", self.corner_uv, "<f8")
+            add("sphere_frame", self.sphere_frame, "<f8")
         return digest.hexdigest()
 
     @property

@@ -39,8 +39,8 @@ MAX_COUNT = 2**31
 
 def read_serialized(path: Path, shape_index: int = 0) -> Mesh:
     """Mesh ``shape_index`` of the serialized file ``path``: positions, faces, vertex normals
-    (None if the file has none) and texture coordinates (None if none), as written (the
-    caller transforms them). Raises MeshError naming the file and what is wrong."""
+    (None if the file has none) and its corners' texture coordinates (None if none), as written
+    (the caller transforms them). Raises MeshError naming the file and what is wrong."""
     try:
         data = path.read_bytes()
     except OSError as exc:
@@ -71,7 +71,10 @@ def read_serialized(path: Path, shape_index: int = 0) -> Mesh:
     if flags & HAS_COLORS:
         stream.array(real, vertex_count * 3)
     faces = stream.array("<u4", face_count * 3).reshape(-1, 3).astype(np.int64)
-    return checked(path, Mesh(vertices, faces, normals, uv))
+    if faces.max() >= vertex_count:
+        raise MeshError(f"{path} has a face index outside its {vertex_count} vertices")
+    corner_uv = None if uv is None else uv[faces].reshape(-1, 6)
+    return checked(path, Mesh(vertices, faces, normals, corner_uv))
 
 
 def _mesh_offset(path: Path, data: bytes, shape_index: int) -> int:

@@ -23,6 +23,7 @@ from ..camera import Camera
 from ..errors import InputError
 from ..inputfiles import read_regular_file
 from ..record import MAX_SAMPLE_INDEX
+from ..textures import TextureTable
 from . import keys
 from .icosphere import unit_icosphere
 from .mesh import Mesh, MeshError, angle_weighted_normals, read_mesh_file
@@ -338,6 +339,10 @@ def _read_materials(path: str, table: Any) -> materials.MaterialTable:
         raise InputError(str(exc), path) from None
 
 
+# The corner coordinates of a triangle without texture coordinates: (u, v) is then (b1, b2).
+NO_UV = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 1.0])
+
+
 class _Geometry:
     """Accumulates shapes as triangle soups with per-triangle columns and shape records."""
 
@@ -356,12 +361,20 @@ class _Geometry:
         self.shape_of_sphere: list[int] = []
         self.corner_normals: list[np.ndarray] = []
         self.smooth = False
+        self.corner_uv: list[np.ndarray] = []
+        self.sphere_frames: list[np.ndarray] = []
+        self.textures = TextureTable()
 
     def add(self, shape_type: str, record: dict[str, Any], vertices: np.ndarray, faces: np.ndarray,
-            material: int, emission: np.ndarray, normals: np.ndarray | None = None) -> None:
+            material: int, emission: np.ndarray, normals: np.ndarray | None = None,
+            corner_uv: np.ndarray | None = None) -> None:
         """Add a shape's triangles; ``normals`` (V, 3) unit vertex normals for smooth shading
-        (a zero normal shades its triangles flat), None for flat shading."""
+        (a zero normal shades its triangles flat), None for flat shading; ``corner_uv`` (F, 6)
+        texture coordinates at each triangle's corners, None for none (a texture then sees the
+        barycentrics, as in Mitsuba)."""
         n = len(faces)
+        self.corner_uv.append(np.tile(NO_UV, (n, 1)) if corner_uv is None
+                              else np.asarray(corner_uv, dtype=np.float64).reshape(n, 6))
         self.corner_normals.append(np.zeros((n, 9)) if normals is None
                                    else np.asarray(normals, dtype=np.float64)[faces].reshape(n, 9))
         self.smooth = self.smooth or normals is not None
@@ -374,7 +387,12 @@ class _Geometry:
         self.shapes.append(Shape(shape_type, self._triangles, n, material, emission, record))
         self._triangles += n
 
-    def add_sphere(self, record: dict[str, Any], material: int, emission: np.ndarray) -> None:
+    def add_sphere(self, record: dict[str, Any], material: int, emission: np.ndarray,
+                   frame: np.ndarray | None = None) -> None:
+        """Add an analytic sphere; ``frame`` (3, 3) its world-to-local rotation, for texture
+        coordinates (None: the world's axes)."""
+        self.sphere_frames.append(np.eye(3).ravel() if frame is None
+                                  else np.asarray(frame, dtype=np.float64).ravel())
         self.spheres.append([*record["center"], record["radius"]])
         self.sphere_material.append(material)
         self.sphere_emission.append(emission)
@@ -404,6 +422,10 @@ class _Geometry:
             sphere_emission=np.array(self.sphere_emission, dtype=np.float64).reshape(-1, 3),
             shape_of_sphere=np.array(self.shape_of_sphere, dtype=np.int32),
             corner_normals=self.normals(),
+            textures=self.textures,
+            corner_uv=(np.concatenate(self.corner_uv) if self.textures and self.corner_uv
+                       else np.zeros((0, 6))),
+            sphere_frame=(np.array(self.sphere_frames).reshape(-1, 9) if self.textures else np.zeros((0, 9))),
         )
 
     def vertices(self) -> np.ndarray:

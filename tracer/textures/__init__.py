@@ -1,0 +1,176 @@
+"""Textures: material parameters that vary over a surface with its (u, v) coordinates.
+
+Two kinds, as Mitsuba 3 defines them (src/textures/checkerboard.cpp, bitmap.cpp):
+
+- ``checkerboard``: ``color0`` where the fractional parts of u and v are both above or both
+  at most 1/2, ``color1`` elsewhere (Mitsuba's one-channel lookup swaps the two: tracer does
+  the same for a one-number parameter such as a roughness);
+- ``bitmap``: an image (``tracer.textures.bitmap``) looked up nearest or bilinearly, its
+  texel (i, j) centred at ((i + 1/2) / W, (j + 1/2) / H) with row 0 the image's top, beyond
+  [0, 1] repeated, mirrored or clamped; a one-number parameter takes the RGB value's
+  luminance, as Mitsuba's ``eval_1`` does.
+
+Both first map (u, v) by ``to_uv``, a 2 x 3 affine matrix (Mitsuba reads a 4 x 4 transform and
+keeps its upper-left 2 x 2 block and the first two entries of its last column).
+
+A scene's :class:`TextureTable` holds its textures and which material parameter each feeds
+(:class:`Binding`). The material table holds, in a textured parameter's columns, the texture's
+mean: what a material's derived constants are computed from, as Mitsuba computes, e.g., the
+plastic's lobe-selection weight from its textures' means. During shading the kernels overwrite
+those columns with the texture's value at the hit (``tracer.textures.lookup``). Only
+parameters whose type marks them ``texture=True`` may be textured: those that no derived
+column depends on except through a mean.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+CHECKERBOARD, BITMAP = 1, 2
+KINDS = {"checkerboard": CHECKERBOARD, "bitmap": BITMAP}
+NEAREST, BILINEAR = 0, 1
+FILTERS = ("nearest", "bilinear")
+REPEAT, MIRROR, CLAMP = 0, 1, 2
+WRAPS = ("repeat", "mirror", "clamp")
+
+# Columns of a texture's row in ``Textures.info`` (float64).
+KIND, TO_UV, FILTER, WRAP, WIDTH, HEIGHT, OFFSET, COLOR0, COLOR1 = 0, 1, 7, 8, 9, 10, 11, 12, 15
+INFO_WIDTH = 18
+# Rec. 709 luminance, as Mitsuba's ``luminance`` (include/mitsuba/core/spectrum.h).
+LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
+
+
+@dataclass
+class Texture:
+    """One texture.
+
+    kind : ``checkerboard`` or ``bitmap``.   to_uv : (2, 3) affine map of (u, v, 1).
+    color0, color1 : (3,) a checkerboard's colours.
+    pixels : (H, W, 3) float32 linear values of a bitmap, row 0 the image's top.
+    filter, wrap : a bitmap's lookup (``FILTERS``, ``WRAPS``).
+    source : where it came from (a file, an element), for messages and the TOML writer.
+    """
+
+    kind: str
+    to_uv: np.ndarray = field(default_factory=lambda: np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
+    color0: np.ndarray = field(default_factory=lambda: np.full(3, 0.4))
+    color1: np.ndarray = field(default_factory=lambda: np.full(3, 0.2))
+    pixels: np.ndarray | None = None
+    filter: str = "bilinear"
+    wrap: str = "repeat"
+    source: str = ""
+    raw: bool = False
+
+    def mean(self, channels: int) -> np.ndarray:
+        """The texture's mean over [0, 1]² as ``channels`` (1 or 3) numbers: what derived
+        material constants use. A bitmap's one-number mean is its luminance's, as Mitsuba's."""
+        if self.kind == "checkerboard":
+            rgb = 0.5 * (self.color0 + self.color1)
+        else:
+            rgb = self.pixels.reshape(-1, 3).astype(np.float64).mean(axis=0)
+        return rgb if channels == 3 else np.array([float(rgb @ LUMINANCE) if self.kind == "bitmap"
+                                                   else float(np.mean(rgb))])
+
+    def value_range(self) -> tuple[float, float]:
+        """The smallest and largest value any lookup can give (bilinear weights are convex)."""
+        values = (np.concatenate([self.color0, self.color1]) if self.kind == "checkerboard"
+                  else self.pixels)
+        return float(np.min(values)), float(np.max(values))
+
+
+@dataclass(frozen=True)
+class Binding:
+    """Texture ``texture`` feeds parameter ``param`` (``size`` columns from ``column``) of the
+    material in row ``material``; lookups are clamped into [lo, hi], the parameter's range."""
+
+    material: int
+    param: str
+    column: int
+    size: int
+    texture: int
+    lo: float
+    hi: float
+
+
+class Textures(NamedTuple):
+    """The textures as the kernels read them.
+
+    info : (T, INFO_WIDTH) float64, a row per texture (columns ``KIND`` ...).
+    pixels : (N,) float32, every bitmap's texels one after another (RGB, row by row).
+    bindings : (B, 5) float64 rows (column, size, texture, lo, hi), grouped by material.
+    first_binding : (K + 1,) int64: material k's bindings are rows first_binding[k] ..
+        first_binding[k + 1] - 1.
+    corner_uv : (F, 6) float64 (u, v) at each triangle's three corners, or (0, 6).
+    sphere_frame : (S, 9) float64 rows of each analytic sphere's world-to-local rotation, for
+        Mitsuba's spherical (u, v), or (0, 9).
+    """
+
+    info: np.ndarray
+    pixels: np.ndarray
+    bindings: np.ndarray
+    first_binding: np.ndarray
+    corner_uv: np.ndarray
+    sphere_frame: np.ndarray
+
+
+@dataclass
+class TextureTable:
+    """A scene's textures and what they feed."""
+
+    textures: list[Texture] = field(default_factory=list)
+    bindings: list[Binding] = field(default_factory=list)
+
+    def __bool__(self) -> bool:
+        return bool(self.bindings)
+
+    def add(self, texture: Texture) -> int:
+        self.textures.append(texture)
+        return len(self.textures) - 1
+
+    def arrays(self, material_count: int, corner_uv: np.ndarray, sphere_frame: np.ndarray) -> Textures:
+        """The kernels' arrays (``Textures``) for a table of ``material_count`` materials."""
+        info = np.zeros((len(self.textures), INFO_WIDTH))
+        pools, offset = [], 0
+        for row, t in zip(info, self.textures, strict=True):
+            row[KIND] = KINDS[t.kind]
+            row[TO_UV:TO_UV + 6] = t.to_uv.ravel()
+            if t.kind == "checkerboard":
+                row[COLOR0:COLOR0 + 3], row[COLOR1:COLOR1 + 3] = t.color0, t.color1
+                continue
+            height, width, _ = t.pixels.shape
+            row[FILTER], row[WRAP] = FILTERS.index(t.filter), WRAPS.index(t.wrap)
+            row[WIDTH], row[HEIGHT], row[OFFSET] = width, height, offset
+            pools.append(np.ascontiguousarray(t.pixels, dtype=np.float32).ravel())
+            offset += pools[-1].size
+        ordered = sorted(self.bindings, key=lambda b: b.material)
+        bindings = np.array([[b.column, b.size, b.texture, b.lo, b.hi] for b in ordered],
+                            dtype=np.float64).reshape(-1, 5)
+        counts = np.bincount([b.material for b in ordered], minlength=material_count)
+        first = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        pixels = np.concatenate(pools) if pools else np.zeros(0, dtype=np.float32)
+        return Textures(info, pixels, bindings, first, np.ascontiguousarray(corner_uv, dtype=np.float64),
+                        np.ascontiguousarray(sphere_frame, dtype=np.float64))
+
+    def digest(self) -> bytes:
+        """SHA-256 of everything a render reads of the table (scene digests include it)."""
+        h = hashlib.sha256(b"tracer textures 1\0")
+        for t in self.textures:
+            h.update(f"{t.kind} {t.filter} {t.wrap}\0".encode())
+            h.update(np.ascontiguousarray(t.to_uv, dtype="<f8").tobytes())
+            if t.kind == "checkerboard":
+                h.update(np.concatenate([t.color0, t.color1]).astype("<f8").tobytes())
+            else:
+                h.update(f"{t.pixels.shape}\0".encode())
+                h.update(np.ascontiguousarray(t.pixels, dtype="<f4").tobytes())
+        for b in self.bindings:
+            h.update(f"{b.material} {b.param} {b.column} {b.size} {b.texture} {b.lo!r} {b.hi!r}\0".encode())
+        return h.digest()
+
+
+def empty_arrays(material_count: int) -> Textures:
+    """The arrays of a scene without textures."""
+    return TextureTable().arrays(material_count, np.zeros((0, 6)), np.zeros((0, 9)))

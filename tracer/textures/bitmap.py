@@ -1,0 +1,59 @@
+"""Image files as texture texels, through OpenImageIO (PNG, JPEG, EXR, HDR, TIFF, ...).
+
+Values are made linear as Mitsuba 3's ``bitmap`` makes them (src/textures/bitmap.cpp): an
+image of integer channels (8 or 16 bits, as PNG and JPEG store them) is sRGB-encoded and decoded
+with the sRGB curve (IEC 61966-2-1), unless ``raw``; an image of float channels (EXR, HDR) is
+linear already. One channel (grey) is used for all three; an alpha channel is dropped. Mitsuba
+keeps 8-bit texels encoded and decodes each fetched texel before it interpolates; decoding
+every texel once here gives the same values.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+# More texels than this (about 1.5 GiB as float32 RGB) are refused before they are read.
+MAX_TEXELS = 2**27
+
+
+def srgb_to_linear(encoded: np.ndarray) -> np.ndarray:
+    """The sRGB decoding curve on values in [0, 1]."""
+    return np.where(encoded <= 0.04045, encoded / 12.92, ((encoded + 0.055) / 1.055) ** 2.4)
+
+
+def read_texels(path: Path, raw: bool, where: str) -> np.ndarray:
+    """(H, W, 3) float32 linear texels of the image ``path``, row 0 its top. Raises InputError
+    naming ``where`` (the file and key that name the image) for a file that cannot be used."""
+    import OpenImageIO as oiio
+
+    if not path.is_file():
+        raise InputError(f"texture image not found: {path}", where)
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        raise InputError(f"cannot read texture image {path}: {oiio.geterror().strip() or 'unknown format'}",
+                         where)
+    try:
+        spec = image.spec()
+        width, height, channels = spec.width, spec.height, spec.nchannels
+        if width <= 0 or height <= 0 or channels <= 0:
+            raise InputError(f"texture image {path} has no pixels", where)
+        if width * height > MAX_TEXELS:
+            raise InputError(f"texture image {path} is {width}x{height}, more than {MAX_TEXELS} texels",
+                             where)
+        integer = spec.format.basetype in (oiio.UINT8, oiio.INT8, oiio.UINT16, oiio.INT16)
+        pixels = image.read_image(0, 0, 0, channels, oiio.FLOAT)
+        if pixels is None:
+            raise InputError(f"cannot read texture image {path}: {image.geterror().strip()}", where)
+    finally:
+        image.close()
+    pixels = np.asarray(pixels, dtype=np.float64).reshape(height, width, channels)
+    colour = pixels[..., :1].repeat(3, axis=2) if channels < 3 else pixels[..., :3]
+    if not np.all(np.isfinite(colour)):
+        raise InputError(f"texture image {path} has NaN or infinite texels", where)
+    if integer and not raw:
+        colour = srgb_to_linear(np.clip(colour, 0.0, 1.0))
+    return np.ascontiguousarray(colour, dtype=np.float32)

@@ -1,0 +1,163 @@
+"""Texture lookups in the kernels: a hit's (u, v), a texture's value there, and the material
+row a textured hit shades with.
+
+(u, v) at a hit follows Mitsuba 3: on a triangle, its corners' coordinates interpolated by the
+hit's barycentrics (a mesh without coordinates gets (b1, b2), the barycentrics themselves, as
+Mitsuba's meshes do: its corners are given (0, 0), (1, 0), (0, 1)); on an analytic sphere,
+(φ / 2π, θ / π) of the hit in the sphere's own frame (φ from its local x axis toward y, in
+[0, 2π); θ from its local z axis).
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..geometry import barycentrics
+from ..jit import jit
+from . import (
+    BILINEAR,
+    CHECKERBOARD,
+    COLOR0,
+    COLOR1,
+    FILTER,
+    HEIGHT,
+    KIND,
+    LUMINANCE,
+    MIRROR,
+    OFFSET,
+    REPEAT,
+    TO_UV,
+    WIDTH,
+    WRAP,
+)
+
+LUMINANCE_R, LUMINANCE_G, LUMINANCE_B = (float(c) for c in LUMINANCE)
+
+
+@jit
+def uv_at(textures, hit_table, first_sphere: int, p: int, x):
+    """(u, v) at point ``x`` of primitive ``p``."""
+    if p >= first_sphere:
+        s = p - first_sphere
+        radius = hit_table[p, 3]
+        d0 = (x[0] - hit_table[p, 0]) / radius
+        d1 = (x[1] - hit_table[p, 1]) / radius
+        d2 = (x[2] - hit_table[p, 2]) / radius
+        frame = textures.sphere_frame
+        if s < len(frame):
+            local0 = frame[s, 0] * d0 + frame[s, 1] * d1 + frame[s, 2] * d2
+            local1 = frame[s, 3] * d0 + frame[s, 4] * d1 + frame[s, 5] * d2
+            local2 = frame[s, 6] * d0 + frame[s, 7] * d1 + frame[s, 8] * d2
+        else:
+            local0, local1, local2 = d0, d1, d2
+        phi = math.atan2(local1, local0)
+        if phi < 0.0:
+            phi += 2.0 * math.pi
+        return phi / (2.0 * math.pi), math.acos(min(max(local2, -1.0), 1.0)) / math.pi
+    _, b1, b2 = barycentrics(hit_table, p, x)
+    corner_uv = textures.corner_uv
+    if len(corner_uv) == 0:
+        return b1, b2
+    b0 = 1.0 - b1 - b2
+    u = b0 * corner_uv[p, 0] + b1 * corner_uv[p, 2] + b2 * corner_uv[p, 4]
+    v = b0 * corner_uv[p, 1] + b1 * corner_uv[p, 3] + b2 * corner_uv[p, 5]
+    return u, v
+
+
+@jit
+def _wrapped(i: int, size: int, wrap: int) -> int:
+    """Texel index ``i`` of a row or column of ``size`` texels, wrapped as ``wrap`` says."""
+    if wrap == REPEAT:
+        return i % size  # Python's modulo: in 0 .. size - 1 for negative i too
+    if wrap == MIRROR:
+        period = i % (2 * size)
+        return period if period < size else 2 * size - 1 - period
+    return min(max(i, 0), size - 1)  # clamp
+
+
+@jit
+def _texel(pixels, offset: int, width: int, i: int, j: int, c: int) -> float:
+    return float(pixels[offset + (j * width + i) * 3 + c])
+
+
+@jit
+def evaluate(textures, t: int, u: float, v: float):
+    """Texture ``t``'s RGB value at (u, v), before any one-number reduction."""
+    info = textures.info
+    m = TO_UV
+    su = info[t, m] * u + info[t, m + 1] * v + info[t, m + 2]
+    sv = info[t, m + 3] * u + info[t, m + 4] * v + info[t, m + 5]
+    if int(info[t, KIND]) == CHECKERBOARD:
+        first = (su - math.floor(su) > 0.5) == (sv - math.floor(sv) > 0.5)
+        column = COLOR0 if first else COLOR1
+        return info[t, column], info[t, column + 1], info[t, column + 2]
+    pixels = textures.pixels
+    width, height, offset = int(info[t, WIDTH]), int(info[t, HEIGHT]), int(info[t, OFFSET])
+    wrap = int(info[t, WRAP])
+    if int(info[t, FILTER]) != BILINEAR:
+        i = _wrapped(int(math.floor(su * width)), width, wrap)
+        j = _wrapped(int(math.floor(sv * height)), height, wrap)
+        return (_texel(pixels, offset, width, i, j, 0), _texel(pixels, offset, width, i, j, 1),
+                _texel(pixels, offset, width, i, j, 2))
+    # Texel centres at (i + 1/2) / width: the four around (su, sv) and their weights.
+    pu, pv = su * width - 0.5, sv * height - 0.5
+    fu, fv = math.floor(pu), math.floor(pv)
+    wu, wv = pu - fu, pv - fv
+    i0, j0 = _wrapped(int(fu), width, wrap), _wrapped(int(fv), height, wrap)
+    i1, j1 = _wrapped(int(fu) + 1, width, wrap), _wrapped(int(fv) + 1, height, wrap)
+    r = g = b = 0.0
+    for c in range(3):
+        value = ((1.0 - wv) * ((1.0 - wu) * _texel(pixels, offset, width, i0, j0, c)
+                               + wu * _texel(pixels, offset, width, i1, j0, c))
+                 + wv * ((1.0 - wu) * _texel(pixels, offset, width, i0, j1, c)
+                         + wu * _texel(pixels, offset, width, i1, j1, c)))
+        if c == 0:
+            r = value
+        elif c == 1:
+            g = value
+        else:
+            b = value
+    return r, g, b
+
+
+@jit
+def evaluate_one(textures, t: int, u: float, v: float) -> float:
+    """Texture ``t``'s one-number value at (u, v), as Mitsuba's ``eval_1``: a checkerboard's
+    colours swapped (color0 where exactly one of the fractional parts is above 1/2), a bitmap's
+    luminance."""
+    info = textures.info
+    if int(info[t, KIND]) == CHECKERBOARD:
+        m = TO_UV
+        su = info[t, m] * u + info[t, m + 1] * v + info[t, m + 2]
+        sv = info[t, m + 3] * u + info[t, m + 4] * v + info[t, m + 5]
+        first = (su - math.floor(su) > 0.5) != (sv - math.floor(sv) > 0.5)
+        return info[t, COLOR0 if first else COLOR1]
+    r, g, b = evaluate(textures, t, u, v)
+    return LUMINANCE_R * r + LUMINANCE_G * g + LUMINANCE_B * b
+
+
+@jit
+def textured_row(textures, params, material: int, hit_table, first_sphere: int, p: int, x, scratch):
+    """``(table, row)`` a hit of primitive ``p`` at ``x`` shades with: ``(params, material)``
+    for a material without textures; otherwise ``(scratch, 0)``, the material's row copied into
+    ``scratch`` (1, W) with each textured parameter's columns set to its texture's value here,
+    clamped into the parameter's range (what the material's kernels are written for)."""
+    first, last = textures.first_binding[material], textures.first_binding[material + 1]
+    if first == last:
+        return params, material
+    for column in range(params.shape[1]):
+        scratch[0, column] = params[material, column]
+    u, v = uv_at(textures, hit_table, first_sphere, p, x)
+    bindings = textures.bindings
+    for k in range(first, last):
+        column, size, t = int(bindings[k, 0]), int(bindings[k, 1]), int(bindings[k, 2])
+        lo, hi = bindings[k, 3], bindings[k, 4]
+        if size == 1:
+            scratch[0, column] = min(max(evaluate_one(textures, t, u, v), lo), hi)
+        else:
+            r, g, b = evaluate(textures, t, u, v)
+            scratch[0, column] = min(max(r, lo), hi)
+            scratch[0, column + 1] = min(max(g, lo), hi)
+            scratch[0, column + 2] = min(max(b, lo), hi)
+    return scratch, 0
+
