@@ -3,8 +3,9 @@
 
 :func:`read_document` turns a scene file into one tree of :class:`Element` (each knowing its
 file and line, for messages), with every include spliced in, every ``$name`` substituted and
-every id resolved, and each file's version recorded; :mod:`tracer.scene.mitsuba_xml` reads
-the plugins from it. The rules are Mitsuba 3.9.1's, checked by loading small scenes with it
+every id resolved, and each file's version recorded (a file of Mitsuba 0.x is then upgraded
+by :mod:`tracer.scene.mitsuba_upgrade`); :mod:`tracer.scene.mitsuba_xml` reads the plugins
+from it. The rules are Mitsuba 3.9.1's, checked by loading small scenes with it
 (``tests/test_mitsuba_xml.py``):
 
 - ``<default name value>`` defines ``$name`` for the attributes that FOLLOW it in document
@@ -106,8 +107,8 @@ class Element:
     file: str
     line: int
     children: list["Element"] = field(default_factory=list)
-    # The name as the file writes it, when the upgrade of an old scene renamed it; attrs["name"]
-    # holds the new one.
+    # The name as the file writes it, when the upgrade of an old scene renamed it
+    # (tracer/scene/mitsuba_upgrade.py); attrs["name"] holds the new one.
     written_name: str | None = None
 
     def describe(self) -> str:
@@ -189,7 +190,8 @@ def read_document(path: str, base: Path | None = None) -> Document:
 
 
 def _check_version(scene: Element) -> tuple[int, int, int]:
-    """The (major, minor, patch) of ``<scene version>``, major 2 or 3."""
+    """The (major, minor, patch) of ``<scene version>``, major 0 to 3 (a file of major 0 or 1 is
+    read after the upgrade Mitsuba 3 applies to it: tracer/scene/mitsuba_upgrade.py)."""
     version = scene.attrs.get("version")
     if version is None:
         scene.fail("missing attribute 'version' (Mitsuba 3 scenes say <scene version=\"3.0.0\">)")
@@ -197,9 +199,8 @@ def _check_version(scene: Element) -> tuple[int, int, int]:
     if not match:
         scene.fail(f"version '{shown(version)}' is not of the form major.minor.patch")
     parts = (int(match.group(1)), int(match.group(2)), int(match.group(3)))
-    if parts[0] not in (2, 3):
-        scene.fail(f"version {version.strip()}: tracer reads Mitsuba 2 and 3 scenes; older scenes use "
-                   "other names (upgrade them with Mitsuba 3 first)")
+    if parts[0] > 3:
+        scene.fail(f"version {version.strip()}: tracer reads scenes of Mitsuba versions 0.x to 3.x")
     return parts
 
 
