@@ -3,8 +3,10 @@
 
 :func:`read_document` turns a scene file into one tree of :class:`Element` (each knowing its
 file and line, for messages), with every include spliced in, every ``$name`` substituted and
-every id resolved; :mod:`tracer.scene.mitsuba_xml` reads the plugins from it. The rules are
-Mitsuba 3.9.1's, checked by loading small scenes with it (``tests/test_mitsuba_xml.py``):
+every id resolved, and each file's version recorded (a file of Mitsuba 0.x is then upgraded
+by :mod:`tracer.scene.mitsuba_upgrade`); :mod:`tracer.scene.mitsuba_xml` reads the plugins
+from it. The rules are Mitsuba 3.9.1's, checked by loading small scenes with it
+(``tests/test_mitsuba_xml.py``):
 
 - ``<default name value>`` defines ``$name`` for the attributes that FOLLOW it in document
   order (a use before it is an error), unless ``name`` is already defined (the first wins); a
@@ -105,11 +107,15 @@ class Element:
     file: str
     line: int
     children: list["Element"] = field(default_factory=list)
+    # The name as the file writes it, when the upgrade of an old scene renamed it
+    # (tracer/scene/mitsuba_upgrade.py); attrs["name"] holds the new one.
+    written_name: str | None = None
 
     def describe(self) -> str:
-        """``<tag type="..." id="..." name="...">``, the attributes that name it (each cut to
-        ``errors.shown``'s length)."""
-        naming = "".join(f' {k}="{shown(self.attrs[k])}"' for k in ("type", "id", "name") if k in self.attrs)
+        """``<tag type="..." id="..." name="...">``, the attributes that name it as the file
+        writes them (each cut to ``errors.shown``'s length)."""
+        attrs = self.attrs if self.written_name is None else {**self.attrs, "name": self.written_name}
+        naming = "".join(f' {k}="{shown(attrs[k])}"' for k in ("type", "id", "name") if k in attrs)
         return f"<{shown(self.tag)}{naming}>"
 
     @property
@@ -135,7 +141,9 @@ class Document:
     root : the ``<scene>`` element (``<default>``, ``<include>``, ``<path>`` and ``<alias>``
         removed).   ids : id (and alias) -> object element.   search_folders : the main file's
         ``<path>`` folders, the latest first.   folder : the scene's folder (the main file's,
-        unless the reader was given another).
+        unless the reader was given another).   versions : each file's ``<scene version>``
+        (major, minor, patch) by the name its elements carry in ``Element.file``, in the order
+        the files were read; an included file without a version is not in it.
     """
 
     path: str
@@ -143,6 +151,7 @@ class Document:
     ids: dict[str, Element]
     search_folders: list[Path]
     folder: Path
+    versions: dict[str, tuple[int, int, int]] = field(default_factory=dict)
 
     def resolve(self, ref: Element) -> Element:
         """The object a ``<ref id>`` stands for."""
@@ -171,25 +180,28 @@ def read_document(path: str, base: Path | None = None) -> Document:
     root = _parse_file(path, path)
     if root.tag != "scene":
         root.fail("the root element of a Mitsuba scene is <scene>")
-    _check_version(root)
     state = _Expansion()
+    state.versions[path] = _check_version(root)
     main = _Scope(Path(path).parent, [], [os.path.realpath(path)], Path(path).parent)
     root.children = state.expand(root, main, 1)
     ids = _collect_ids(root, state.aliases)
     folder = base if base is not None else Path(path).parent
-    return Document(path, root, ids, main.resolver, folder)
+    return Document(path, root, ids, main.resolver, folder, state.versions)
 
 
-def _check_version(scene: Element) -> None:
+def _check_version(scene: Element) -> tuple[int, int, int]:
+    """The (major, minor, patch) of ``<scene version>``, major 0 to 3 (a file of major 0 or 1 is
+    read after the upgrade Mitsuba 3 applies to it: tracer/scene/mitsuba_upgrade.py)."""
     version = scene.attrs.get("version")
     if version is None:
         scene.fail("missing attribute 'version' (Mitsuba 3 scenes say <scene version=\"3.0.0\">)")
     match = re.fullmatch(r"([0-9]{1,6})\.([0-9]{1,6})\.([0-9]{1,6})", version.strip())
     if not match:
         scene.fail(f"version '{shown(version)}' is not of the form major.minor.patch")
-    if int(match.group(1)) not in (2, 3):
-        scene.fail(f"version {version.strip()}: tracer reads Mitsuba 2 and 3 scenes; older scenes use "
-                   "other names (upgrade them with Mitsuba 3 first)")
+    parts = (int(match.group(1)), int(match.group(2)), int(match.group(3)))
+    if parts[0] > 3:
+        scene.fail(f"version {version.strip()}: tracer reads scenes of Mitsuba versions 0.x to 3.x")
+    return parts
 
 
 def _parse_file(path: str, label: str) -> Element:
@@ -272,6 +284,7 @@ class _Expansion:
     def __init__(self):
         self.defaults: dict[str, str] = {}
         self.aliases: list[Element] = []
+        self.versions: dict[str, tuple[int, int, int]] = {}  # Document.versions
         self.files = 1
         self.paths = 0
         self.substituted = 0  # characters $name substitution has added, in all files
@@ -396,7 +409,7 @@ class _Expansion:
             root.fail("an included file's root element is <scene>")
         self.substitute(root)
         if "version" in root.attrs:
-            _check_version(root)
+            self.versions[str(path)] = _check_version(root)
         return self.expand(root, inner, depth)
 
 

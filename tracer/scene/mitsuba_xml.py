@@ -45,6 +45,7 @@ from .mitsuba_document import (
     transform_matrix,
     xyz,
 )
+from .mitsuba_upgrade import upgrade_document
 from .model import Scene
 from .serialized import read_serialized
 from .toml_reader import MAX_COORDINATE, MAX_RADIANCE, MAX_SIDE, _Geometry, check_resolution
@@ -88,10 +89,15 @@ def read_mitsuba_scene(path: str, width: int | None = None, height: int | None =
                        base: Path | None = None, notify: Callable[[str], None] | None = None) -> Scene:
     """Read the Mitsuba 3 XML scene ``path``; ``width``/``height`` override the film's size,
     ``base`` the folder relative mesh files are looked for in (default: the scene's folder).
-    What the scene asks for and tracer does not do is passed to ``notify`` as one line."""
+    A file of Mitsuba version 0.x or 1.x is first upgraded as Mitsuba 3 upgrades it
+    (:mod:`tracer.scene.mitsuba_upgrade`), and that is told in one line. What the scene asks
+    for and tracer does not do is passed to ``notify`` as one line."""
     document = read_document(path, base)
+    upgrade = upgrade_document(document)
     reader = _SceneReader(document, width, height)
     scene = reader.read()
+    if upgrade is not None and notify is not None:
+        notify(one_line(upgrade.note(path)))
     if reader.notes and notify is not None:
         notify(one_line(f"{path}: tracer renders direct light with its own strategies and a box filter; "
                         f"not obeyed: {'; '.join(reader.notes)}"))
@@ -405,7 +411,9 @@ class _SceneReader:
     def film(self, element: Element, written: Element) -> tuple[int, int]:
         p = self.plugin(element)
         if p.type != "hdrfilm":
-            p.fail(f"film '{shown(p.type)}' is not supported; tracer reads hdrfilm (and writes its own EXR)")
+            hint = " (Mitsuba 0.6's; Mitsuba 3 has none either)" if p.type == "ldrfilm" else ""
+            p.fail(f"film '{shown(p.type)}' is not supported{hint}; tracer reads hdrfilm (and writes its own "
+                   "EXR)")
         width = p.integer("width", FILM_SIZE[0], 1, MAX_SIDE)
         height = p.integer("height", FILM_SIZE[1], 1, MAX_SIDE)
         crop = {name: p.integer(name, default, 0, MAX_SIDE) for name, default in
