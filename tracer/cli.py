@@ -154,7 +154,16 @@ def build_parser() -> argparse.ArgumentParser:
                        "efficiency-ratio maps, metrics.json/csv and index.html, whose interactive viewer "
                        "(it opens from disk) flips, zooms and reads out the float images.")
     c.add_argument("scene", help=SCENE_HELP)
-    c.add_argument("--reference", required=True, help="reference EXR (tracer reference)")
+    c.add_argument("--reference", required=True,
+                   help="reference EXR: tracer reference's, or another renderer's (channels R, G, B, or a "
+                   "gray Y; variance.R/G/B if present, read as one sample's variance, as tracer writes it)")
+    c.add_argument("--reference-layer", metavar="NAME",
+                   help="another renderer's EXR: compare with layer NAME (channels NAME.R, NAME.G, NAME.B, "
+                   "variance NAME.variance.R/G/B); default the plain R, G, B, else the file's one RGB layer")
+    c.add_argument("--reference-spp", type=_int_in(2, MAX_SPP), metavar="N",
+                   help="another renderer's EXR: samples per pixel it holds, by which its variance channels "
+                   "are divided to subtract its noise from the errors (without it nothing is subtracted, "
+                   "and compare says so); a tracer reference's own count is in its header")
     c.add_argument("--strategies", default=",".join(CLASSIC_STRATEGIES),
                    help=f"comma-separated strategies, some of {', '.join(STRATEGIES)} (default: all but ris)")
     budget = c.add_mutually_exclusive_group(required=True)
@@ -837,11 +846,10 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from .imagefiles import read_exr
     from .strategy import STRATEGIES, Strategy
     from .study import report
     from .study.compare import ALLOCATIONS, Comparison, product_of_options
-    from .study.reference import independent_seeds, scene_for_reference
+    from .study.reference import independent_seeds, read_reference, scene_for_reference
 
     names = [n.strip() for n in args.strategies.split(",") if n.strip()]
     formats = [f.strip().lower() for text in args.figure_format or [] for f in text.split(",") if f.strip()]
@@ -853,7 +861,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if unknown or not names:
         raise InputError(f"--strategies: unknown strategy '{unknown[0] if unknown else ''}' "
                          f"(expected some of {', '.join(STRATEGIES)})", "command line")
-    reference = read_exr(args.reference)
+    reference = read_reference(args.reference, args.reference_layer, args.reference_spp)
     scene = scene_for_reference(args.scene, args.reference, reference, quiet=args.quiet)
     for x, y, w, h in args.crop or []:
         if x + w > reference.width or y + h > reference.height:
@@ -903,7 +911,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         # A strategy cut short would be compared at less time or fewer samples than the others.
         print(f"tracer: interrupted: the comparison is incomplete, nothing written to {out}", file=sys.stderr)
         return EXIT_INTERRUPTED
-    _warn_if_reference_is_noisy(comparison.reference_relmse, runs, args.reference)
+    _warn_if_reference_is_noisy(comparison.reference_relmse, runs, reference)
     # The report is many files; a signal while they are written is held until all are.
     with interrupts.deferred() as arrived:
         document = report.make_report(out, scene.name, args.reference, reference, runs, mode, sweep,
@@ -920,6 +928,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
         sweep_lines = report.terminal_tables(document)
         if sweep_lines:
             print("", *sweep_lines, sep="\n", file=sys.stderr)
+    uncorrected = report.uncorrected_line(reference)
+    if uncorrected:  # under the table it qualifies; with --quiet too: it changes what the numbers mean
+        print(f"tracer: note: {uncorrected}", file=sys.stderr)
+    if not args.quiet:
         print(f"-> {out / 'index.html'}", file=sys.stderr)
     if arrived:
         print(f"tracer: interrupted while writing the report; it was completed first: {out}", file=sys.stderr)
@@ -932,16 +944,21 @@ def cmd_compare(args: argparse.Namespace) -> int:
 NOISY_REFERENCE_SHARE = 0.1
 
 
-def _warn_if_reference_is_noisy(reference_relmse: float, runs, reference_path: str) -> None:
+def _warn_if_reference_is_noisy(reference_relmse: float | None, runs, reference) -> None:
     """One warning line when the reference's noise is a noticeable share of some strategy's
-    measured (uncorrected) relMSE."""
+    measured (uncorrected) relMSE; none where that noise is not known (None). ``reference``: the
+    ``study.reference.Reference``, whose kind says how to get a better one."""
+    if reference_relmse is None:
+        return
     worst = max(runs, key=lambda r: reference_relmse / max(r.measures["relmse_uncorrected"], 1e-300))
     measured = worst.measures["relmse_uncorrected"]
     if measured > 0.0 and reference_relmse > NOISY_REFERENCE_SHARE * measured:
+        better = (f"tracer reference ... --resume -o {reference.path}" if reference.external is None
+                  else "render it with more samples")
         print(f"tracer: warning: the reference's own noise (relMSE {reference_relmse:.3g}) is "
               f"{min(reference_relmse / measured, 1.0):.0%} of {worst.strategy.label}'s measured error "
               f"({measured:.3g}); it is subtracted from every error, but a longer reference would measure "
-              f"better: tracer reference ... --resume -o {reference_path}", file=sys.stderr)
+              f"better: {better}", file=sys.stderr)
 
 
 def cmd_check(args: argparse.Namespace) -> int:

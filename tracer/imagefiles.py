@@ -28,6 +28,11 @@ A render that learned between passes (``tracer.tuning``) adds what it learned pe
 that are light samples) and ``alpha.R/G/B`` (optimal MIS: the control variate's coefficient).
 They are for looking at; reads ignore them.
 
+An EXR that another renderer wrote (no ``tracer:spp`` in its header: :func:`is_tracer_exr`)
+is read by :func:`read_external_exr` as what it holds: the RGB (or gray) pixel values of a
+channel set or layer, and ``variance.*`` channels if present, taken in tracer's convention
+(one sample's variance). Its sample count and scene are not known from the file.
+
 Every write is atomic (``tracer.atomic``) and checked: an error from OpenImageIO, also at
 close, raises ``InputError`` and leaves any existing file as it was.
 """
@@ -35,6 +40,7 @@ close, raises ``InputError`` and leaves any existing file as it was.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -53,6 +59,8 @@ FLOAT_EXACT = 2**24
 MAX_SPLIT_COUNT = FLOAT_EXACT * FLOAT_EXACT  # what the two channels hold (exclusive)
 SPP_ATTRIBUTE = "tracer:spp"
 REPLICATE_LAYER = "replicate{}"
+VARIANCE_LAYER = "variance"
+MOMENT_PREFIX = "m2_"  # Mitsuba 3's moment integrator: second moments (read_external_exr)
 FLOAT32_MAX = 3.4028234e38
 HALF_MAX = 65504.0  # the largest finite 16-bit float
 MAX_COUNT = 2**53  # sample counts stay exact in float64
@@ -135,28 +143,13 @@ def check_writable(film: Film, where: str) -> None:
 def read_exr(path: str | os.PathLike[str]) -> Film:
     """Read a render EXR (written by :func:`write_exr`, or any EXR with its six channels) into a
     film whose record is the header's."""
-    import OpenImageIO as oiio
-
     path = str(path)
-    if not os.path.isfile(path):
-        raise InputError("no such file", path)
-    inp = oiio.ImageInput.open(path)
-    if inp is None:
-        raise InputError(f"cannot read image: {_error_text(oiio)}", path)
-    try:
-        spec = inp.spec()
-        data = inp.read_image(0, 0, 0, spec.nchannels, "float")
-        error = _error_text(inp) if data is None else ""
-    finally:
-        inp.close()
-    if data is None:
-        raise InputError(f"cannot read image data{': ' + error if error else ''}", path)
+    spec, _, data = _read_pixels(path)
     names = list(spec.channelnames)
     missing = [c for c in CHANNELS if c not in names]
     if missing:
         raise InputError(f"missing channel(s) {', '.join(missing)} (has {', '.join(names)})", path)
-    data = np.asarray(data, dtype=np.float64).reshape(spec.height * spec.width, spec.nchannels)
-    attributes = {a.name: a.value for a in spec.extra_attribs if a.name.startswith("tracer:")}
+    attributes = _tracer_attributes(spec)
     spp = _sample_count(attributes.get(SPP_ATTRIBUTE, 0), path)
     count = _read_counts(names, data, spec.width, path)
     if count is None:
@@ -201,6 +194,36 @@ def read_exr(path: str | os.PathLike[str]) -> Film:
     film = Film(spec.width, spec.height, count, mean, m2, record)
     _read_replicates(film, names, data, path, _means_are_half(spec))
     return film
+
+
+def _read_pixels(path: str, header_only: bool = False) -> tuple[Any, str, np.ndarray | None]:
+    """The image's spec, its file format (OpenImageIO's name: ``openexr``, ``png`` ...) and its
+    pixels as ``(P, C)`` float64, row-major (None with ``header_only``); InputError if there is
+    no such file or OpenImageIO cannot read it."""
+    import OpenImageIO as oiio
+
+    if not os.path.isfile(path):
+        raise InputError("no such file", path)
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise InputError(f"cannot read image: {_error_text(oiio)}", path)
+    try:
+        spec, file_format = inp.spec(), inp.format_name()
+        if header_only:
+            return spec, file_format, None
+        data = inp.read_image(0, 0, 0, spec.nchannels, "float")
+        error = _error_text(inp) if data is None else ""
+    finally:
+        inp.close()
+    if data is None:
+        raise InputError(f"cannot read image data{': ' + error if error else ''}", path)
+    return spec, file_format, np.asarray(data, dtype=np.float64).reshape(spec.height * spec.width,
+                                                                         spec.nchannels)
+
+
+def _tracer_attributes(spec) -> dict[str, Any]:
+    """The header's ``tracer:*`` attributes, by name."""
+    return {a.name: a.value for a in spec.extra_attribs if a.name.startswith("tracer:")}
 
 
 def _read_counts(names: list[str], data: np.ndarray, width: int, path: str) -> np.ndarray | None:
@@ -283,6 +306,149 @@ def _read_replicates(film: Film, names: list[str], data: np.ndarray, path: str, 
     if bad.any():
         raise InputError(f"the replicate means give a variance beyond what a 32-bit float holds at "
                          f"{_pixel(bad, film.width)}", path)
+
+
+def is_tracer_exr(path: str | os.PathLike[str]) -> bool:
+    """Whether the file is a tracer render: its header holds ``tracer:spp`` (written by
+    :func:`write_exr`, and by ``benchmarks/mitsuba_render.py``). Reads the header only;
+    InputError if there is no such file or it cannot be read."""
+    spec, _, _ = _read_pixels(str(path), header_only=True)
+    return SPP_ATTRIBUTE in _tracer_attributes(spec)
+
+
+@dataclass
+class ExternalImage:
+    """An image read from an EXR that another renderer wrote (Mitsuba 3, ...): its pixel
+    values and, where the file has them, its variance channels. Nothing else is known of it.
+
+    width, height : pixels.
+    mean : (P, 3) float64 pixel values, row-major, row 0 at the top (a gray ``Y`` file: R = G = B).
+    variance : (P, 3) float64 or None: the ``variance.*`` channels, read in tracer's convention
+        as the variance of *one sample's* estimate (the pixel value's variance is this / spp;
+        module docstring); None if the file has none.
+    channels : the three channels ``mean`` was read from (``R, G, B``; ``beauty.R`` ...; ``Y``
+        three times).
+    variance_channels : likewise for ``variance``, or None.
+    has_moments : whether the file has channels ``m2_*`` (Mitsuba 3's ``moment`` integrator),
+        which are not read (see :func:`read_external_exr`).
+    """
+
+    width: int
+    height: int
+    mean: np.ndarray
+    variance: np.ndarray | None
+    channels: tuple[str, str, str]
+    variance_channels: tuple[str, str, str] | None
+    has_moments: bool
+
+
+def read_external_exr(path: str | os.PathLike[str], layer: str | None = None) -> ExternalImage:
+    """Read the RGB image of an EXR that is not a tracer render, and its variance channels.
+
+    The colour is channels ``R, G, B`` or, for a gray image, ``Y`` (R = G = B), of ``layer``
+    (channels ``LAYER.R`` ...) if one is named; otherwise the plain channels, or, when the file
+    has none, its one RGB layer (several are refused, naming them). Names match in any case
+    (``r``), exactly where two differ only in case. The variance is channels ``variance.R/G/B``
+    (``variance.Y``; ``LAYER.variance.R`` ... for a layer), if present.
+
+    Mitsuba 3 writes no variance channel of its own: its ``moment`` integrator adds channels
+    ``m2_<name>.X/Y/Z``, the film's average of each sample's *square*, per CIE XYZ channel (raw
+    second moments, not variances). m2 - mean^2 is one sample's variance of X, Y or Z, but an
+    RGB variance needs the covariances between X, Y and Z, which it does not record: those
+    channels are not read (``has_moments`` says they were there).
+
+    InputError, naming the file: not an OpenEXR file, a crop of a larger frame, no colour
+    channels (or a partial set), CIE XYZ instead of RGB, a partial variance set, or a value
+    that is not finite (a variance that is negative) at some pixel.
+    """
+    path = str(path)
+    spec, file_format, data = _read_pixels(path)
+    if file_format != "openexr":
+        raise InputError(f"is a {file_format} image, not an OpenEXR file (a reference holds linear "
+                         "floats)", path)
+    if (spec.x, spec.y, spec.width, spec.height) != (spec.full_x, spec.full_y, spec.full_width,
+                                                     spec.full_height):
+        raise InputError(f"holds a {spec.width}x{spec.height} crop of a {spec.full_width}x{spec.full_height} "
+                         "frame (its data window is not its display window): a reference is a whole frame",
+                         path)
+    names = list(spec.channelnames)
+    prefix = _colour_prefix(names, layer, path)
+    colour = _colour_channels(names, prefix, path)
+    if colour is None:
+        raise InputError(f"no channels {prefix}R, {prefix}G, {prefix}B (nor a gray {prefix}Y) "
+                         f"(has {', '.join(names)})", path)
+    gray = colour[0] == colour[1]
+    found = [_channel(names, f"{prefix}{VARIANCE_LAYER}.{c}", path) for c in ("Y" if gray else "RGB")]
+    present = [name for name in found if name is not None]
+    if present and len(present) != len(found):
+        wanted = ", ".join(f"{prefix}{VARIANCE_LAYER}.{c}" for c in ("Y" if gray else "RGB"))
+        raise InputError(f"has variance channel(s) {', '.join(present)} but not all of {wanted}", path)
+    variance_channels = (tuple(present * 3) if gray else tuple(present)) if present else None
+    mean = np.ascontiguousarray(data[:, [names.index(c) for c in colour]])
+    bad = ~np.all(np.isfinite(mean), axis=1)
+    if bad.any():
+        raise InputError(f"{', '.join(dict.fromkeys(colour))} is not a finite number at "
+                         f"{_pixel(bad, spec.width)}: {mean[np.argmax(bad)].tolist()}", path)
+    variance = None
+    if variance_channels is not None:
+        variance = np.ascontiguousarray(data[:, [names.index(c) for c in variance_channels]])
+        bad = ~np.all(np.isfinite(variance) & (variance >= 0.0), axis=1)
+        if bad.any():
+            raise InputError(f"{', '.join(dict.fromkeys(variance_channels))} is not a finite non-negative "
+                             f"number at {_pixel(bad, spec.width)}: {variance[np.argmax(bad)].tolist()}",
+                             path)
+    return ExternalImage(spec.width, spec.height, mean, variance, colour, variance_channels,
+                         any(name.startswith(MOMENT_PREFIX) for name in names))
+
+
+def _channel(names: list[str], wanted: str, path: str) -> str | None:
+    """The channel named ``wanted``, or else the one that differs from it only in case; None if
+    there is none. InputError where several differ from it only in case."""
+    if wanted in names:
+        return wanted
+    matches = [name for name in names if name.lower() == wanted.lower()]
+    if len(matches) > 1:
+        raise InputError(f"channels {', '.join(matches)} differ only in case: which is {wanted} is "
+                         "not clear", path)
+    return matches[0] if matches else None
+
+
+def _colour_channels(names: list[str], prefix: str, path: str) -> tuple[str, str, str] | None:
+    """The channels of the colour whose names start with ``prefix`` (``""`` or ``"LAYER."``):
+    R, G, B, or a gray Y three times; None if there are neither. InputError for a partial
+    R, G, B set, or X, Y, Z (CIE XYZ, which is not RGB)."""
+    rgb = [_channel(names, prefix + c, path) for c in "RGB"]
+    if all(rgb):
+        return rgb[0], rgb[1], rgb[2]
+    if any(rgb):
+        missing = [prefix + c for c, name in zip("RGB", rgb, strict=True) if name is None]
+        raise InputError(f"missing channel(s) {', '.join(missing)} (has {', '.join(names)})", path)
+    x, y, z = (_channel(names, prefix + c, path) for c in "XYZ")
+    if y and (x or z):
+        raise InputError(f"holds CIE XYZ (channels {prefix}X, {prefix}Y, {prefix}Z), not RGB: write it as "
+                         "RGB (Mitsuba: hdrfilm's pixel_format rgb)", path)
+    return (y, y, y) if y else None
+
+
+def _colour_prefix(names: list[str], layer: str | None, path: str) -> str:
+    """Where the colour channels are: ``"LAYER."`` for a named layer, ``""`` for plain channels,
+    else the file's one RGB layer (layers ``variance`` and ``LAYER.variance`` are variances, not
+    colours). InputError for several RGB layers and none named."""
+    if layer is not None:
+        return f"{layer}."
+    if _colour_channels(names, "", path) is not None:
+        return ""
+    components: dict[str, set[str]] = {}
+    for name in names:
+        head, dot, last = name.rpartition(".")
+        if dot and last.upper() in ("R", "G", "B"):
+            components.setdefault(head, set()).add(last.upper())
+    layers = [head for head, found in components.items()
+              if found == {"R", "G", "B"} and head.rpartition(".")[2].lower() != VARIANCE_LAYER]
+    if len(layers) > 1:
+        raise InputError(f"no plain R, G, B channels but {len(layers)} RGB layers ({', '.join(layers)}): "
+                         "name the one to compare with (--reference-layer)", path)
+    return f"{layers[0]}." if layers else ""
 
 
 def _error_text(source) -> str:

@@ -18,7 +18,9 @@ are the independent units; points of one seed share their samples).
 
 Errors are measured with the reference's own variance subtracted (``metrics``), so that a
 noisy reference does not make every strategy look worse by the same amount and hide their
-differences. A Ctrl-C (or SIGTERM) during any render stops the comparison with
+differences; where that variance is not known (another renderer's image without variance
+channels or a sample count: ``reference.Reference``), nothing is subtracted and the measures
+are as measured. A Ctrl-C (or SIGTERM) during any render stops the comparison with
 ``KeyboardInterrupt``: a strategy interrupted mid-way would be compared at fewer samples or
 less time than the others, so no partial result is measured.
 """
@@ -46,7 +48,13 @@ from ..sampler_choice import DEFAULT_SAMPLER
 from ..scene import Scene
 from ..strategy import Strategy
 from . import metrics
-from .reference import independent_seed, independent_seeds, scene_for_reference  # noqa: F401 (compare's API)
+from .reference import (  # noqa: F401 (independent_seed, independent_seeds, scene_for_reference: compare's API)
+    Reference,
+    as_reference,
+    independent_seed,
+    independent_seeds,
+    scene_for_reference,
+)
 
 # (light, bsdf) samples per camera sample for the MIS allocation sweep: ratios 1:0 ... 0:1.
 ALLOCATIONS = ((4, 0), (3, 1), (2, 2), (1, 3), (0, 4))
@@ -135,9 +143,10 @@ class Run:
     def spp(self) -> int:
         return self.film.spp
 
-    def measure(self, reference: np.ndarray, reference_variance: np.ndarray) -> dict[str, float]:
-        """mse, relmse (the reference's variance ``(P, 3)`` subtracted), variance, efficiency
-        against ``reference (P, 3)``, and mse and relmse as measured (``*_uncorrected``)."""
+    def measure(self, reference: np.ndarray, reference_variance: np.ndarray | None) -> dict[str, float]:
+        """mse, relmse (the reference's variance ``(P, 3)`` subtracted; None: not known, nothing
+        subtracted), variance, efficiency against ``reference (P, 3)``, and mse and relmse as
+        measured (``*_uncorrected``)."""
         rel = metrics.relmse(self.film.mean, reference, reference_variance)
         self.measures = {
             "mse": metrics.mse(self.film.mean, reference, reference_variance),
@@ -151,10 +160,12 @@ class Run:
 
 
 class Comparison:
-    """Renders of one scene with shared Embree state, measured against one reference."""
+    """Renders of one scene with shared Embree state, measured against one reference (a
+    tracer render's film, or a :class:`Reference`, which may be another renderer's image)."""
 
-    def __init__(self, scene: Scene, reference: Film, seed: int = 0, threads: int = 2,
+    def __init__(self, scene: Scene, reference: Film | Reference, seed: int = 0, threads: int = 2,
                  progress: bool = False, clock: str = "wall"):
+        reference = as_reference(reference)
         cam = scene.camera
         if (reference.width, reference.height) != (cam.width, cam.height):
             raise ValueError(f"reference is {reference.width}x{reference.height}, scene renders at "
@@ -163,7 +174,7 @@ class Comparison:
             raise ValueError(f"clock {clock!r}: expected one of {', '.join(CLOCKS)}")
         self.scene = scene
         self.reference = reference
-        self.reference_variance = reference.variance_of_mean()
+        self.reference_variance = reference.pixel_variance  # (P, 3), or None: not known
         self.seed = seed
         self.threads = threads
         self.progress = progress
@@ -214,8 +225,11 @@ class Comparison:
         return run
 
     @property
-    def reference_relmse(self) -> float:
-        """The reference's own noise on the relMSE scale (what the measures subtract)."""
+    def reference_relmse(self) -> float | None:
+        """The reference's own noise on the relMSE scale (what the measures subtract); None
+        where its variance is not known (nothing is subtracted)."""
+        if self.reference_variance is None:
+            return None
         return metrics.reference_relmse(self.reference.mean, self.reference_variance)
 
     def equal_spp(self, strategy: Strategy, spp: int, sampler: str = DEFAULT_SAMPLER) -> Run:
@@ -364,7 +378,7 @@ _WORKER_COMPARISON: dict[str, Comparison] = {}
 _WORKER_LOCK = threading.Lock()  # a worker runs one task per thread
 
 
-def comparison_call(token: str, scene: Scene, reference: Film, seed: int, clock: str, name: str,
+def comparison_call(token: str, scene: Scene, reference: Reference, seed: int, clock: str, name: str,
                     args: tuple) -> Any:
     """A task (``Comparison.perform``): method ``name`` of the comparison ``token`` on one thread."""
     with _WORKER_LOCK:

@@ -32,6 +32,7 @@ from .compare import (
     run_row,
     sweep_curves,
 )
+from .reference import Reference
 
 RELERR_RANGE = (-5.0, 1.0)  # log10 of per-pixel relative squared error shown in the maps
 RATIO_RANGE = 4.0  # log2 efficiency ratio shown from -4 to 4 (16x either way)
@@ -233,12 +234,13 @@ def _outline(tile: np.ndarray, window: tuple[int, int, int, int], color=(1.0, 0.
     tile[y:y + h, x + w - 1] = c
 
 
-def grid_image(runs: list[Run], reference: Film, windows: list[tuple[int, int, int, int]],
+def grid_image(runs: list[Run], reference: Film | Reference, windows: list[tuple[int, int, int, int]],
                exposure: float, path: Path) -> int:
     """Reference and each run side by side, each under a band of labels and above zoomed insets,
     the insets' windows outlined in red on the reference. Returns the band's height in pixels
     (the image of each column starts that far down)."""
-    columns = [("reference", reference, [f"reference {reference.spp} spp"])] + [
+    spp = "spp unknown" if reference.spp is None else f"{reference.spp} spp"
+    columns = [("reference", reference, [f"reference {spp}"])] + [
         (run_name(r), r.film, [run_name(r), f"{r.spp} spp  {r.seconds:.2f} {_unit(r.clock)}",
                                f"relMSE {r.measures['relmse']:.3g}"]) for r in runs]
     width = reference.width
@@ -525,6 +527,15 @@ def write_index(out: Path, document: dict[str, Any], images: dict[str, list[list
              + "\n".join(rows) + "\n</table>")
     clock_text = ("process CPU time of each render, summed over its threads (time.process_time)"
                   if clock == "cpu" else "wall-clock time of each render")
+    noise = document["reference_noise"]
+    if noise["subtracted"]:
+        correction = (f"each less the reference's own variance (its noise, relMSE {number(noise['relmse'])}, "
+                      "which adds to every measured error; <code>*_uncorrected</code> in the data are as "
+                      "measured; the error maps are uncorrected)")
+        noise_note = ""
+    else:  # the one line compare prints, as a paragraph of its own above the table
+        correction = "each as measured (nothing is subtracted for the reference's own noise: see the note)"
+        noise_note = f"<p class=note><b>Note:</b> {esc(noise['correction'])}.</p>\n"
     page = f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8">
 <title>tracer compare: {esc(document['scene'])}</title>
@@ -540,15 +551,13 @@ td:first-child, th:first-child {{ text-align: left; }}
 .row img[src$="allocation.png"] {{ width: 550px; }}
 p {{ max-width: 60em; }}
 .also {{ font-size: 0.85em; }}
+.note {{ background: #fff4d6; padding: 0.4em 0.6em; }}
 </style></head><body>
 <h1>{esc(document['scene'])}: sampling strategies compared</h1>
-<p>Mode: <b>{esc(mode['kind'])}</b> ({esc(mode['description'])}). Times are the {clock_text}.
-Reference: <code>{esc(document['reference'])}</code> ({document['reference_spp']} spp,
-{esc(str(document['reference_strategy']))}).
-relMSE = mean (I&minus;R)&sup2;/(R&sup2;+0.01) and MSE = mean (I&minus;R)&sup2;, each less the
-reference's own variance (its noise, relMSE {number(document['reference_noise']['relmse'])}, which
-adds to every measured error; <code>*_uncorrected</code> in the data are as measured; the error maps
-are uncorrected); efficiency = 1/(relMSE &times; {seconds_head}), n/a where relMSE is not positive.
+{noise_note}<p>Mode: <b>{esc(mode['kind'])}</b> ({esc(mode['description'])}). Times are the {clock_text}.
+Reference: <code>{esc(document['reference'])}</code> ({esc(document['reference_description'])}).
+relMSE = mean (I&minus;R)&sup2;/(R&sup2;+0.01) and MSE = mean (I&minus;R)&sup2;, {correction};
+efficiency = 1/(relMSE &times; {seconds_head}), n/a where relMSE is not positive.
 Data: <a href="metrics.json">metrics.json</a>, <a href="metrics.csv">metrics.csv</a>.{viewer_text}
 Click a column's head to sort the table.</p>
 {viewer.section_html(table, html.escape(viewer_omitted) if viewer_omitted else None)}
@@ -619,7 +628,28 @@ def efficiency_pairs(runs: list[Run]) -> list[tuple[Run, Run]]:
     return pairs + [(r, first[r.strategy.name]) for r in runs if r is not first[r.strategy.name]]
 
 
-def make_report(out: Path, scene_name: str, reference_path: str, reference: Film, runs: list[Run],
+def uncorrected_line(reference: Reference) -> str | None:
+    """The one line that says the reference's noise is not subtracted, and why (None when it
+    is): printed by ``tracer compare`` and written into the report's page and metrics.json."""
+    if reference.uncorrected_because is None:
+        return None
+    return (f"mse and relmse are as measured, the reference's own noise not subtracted: "
+            f"{reference.uncorrected_because}")
+
+
+def reference_noise(reference: Reference) -> dict[str, Any]:
+    """``metrics.json``'s ``reference_noise``: the reference's own noise on the relMSE and MSE
+    scales and whether it was subtracted (null where its variance is not known)."""
+    line = uncorrected_line(reference)
+    if line is not None:
+        return {"relmse": None, "mse": None, "subtracted": False, "correction": line}
+    return {"relmse": metrics.reference_relmse(reference.mean, reference.pixel_variance),
+            "mse": float(np.mean(reference.pixel_variance)), "subtracted": True,
+            "correction": "mse and relmse have the reference's per-pixel variance subtracted "
+                          "(unbiased for the image's own error); *_uncorrected are as measured"}
+
+
+def make_report(out: Path, scene_name: str, reference_path: str, reference: Reference, runs: list[Run],
                 mode: dict[str, Any], sweep: list[dict[str, Any]], allocation: list[Run],
                 crops: list[tuple[int, int, int, int]] | None, exposure: float,
                 target: float, figure_formats: tuple[str, ...] = ("png",),
@@ -643,7 +673,7 @@ def make_report(out: Path, scene_name: str, reference_path: str, reference: Film
     return document
 
 
-def _write_report(out: Path, scene_name: str, reference_path: str, reference: Film, runs: list[Run],
+def _write_report(out: Path, scene_name: str, reference_path: str, reference: Reference, runs: list[Run],
                   mode: dict[str, Any], sweep: list[dict[str, Any]], allocation: list[Run],
                   crops: list[tuple[int, int, int, int]] | None, exposure: float, target: float,
                   figure_formats: tuple[str, ...],
@@ -696,15 +726,12 @@ def _write_report(out: Path, scene_name: str, reference_path: str, reference: Fi
     viewer.write_viewer(out, None if omitted else viewer.viewer_data(
         scene_name, reference, viewed, exposure, RELERR_RANGE, RATIO_RANGE, baseline))
 
-    reference_variance = reference.variance_of_mean()
     document: dict[str, Any] = {
         "scene": scene_name, "reference": reference_path, "reference_spp": reference.spp,
         "reference_strategy": reference.record.strategy,
-        "reference_noise": {
-            "relmse": metrics.reference_relmse(reference.mean, reference_variance),
-            "mse": float(np.mean(reference_variance)),
-            "correction": "mse and relmse have the reference's per-pixel variance subtracted "
-                          "(unbiased for the image's own error); *_uncorrected are as measured"},
+        "reference_made_by": "tracer" if reference.external is None else "another renderer",
+        "reference_description": reference.description,
+        "reference_noise": reference_noise(reference),
         "mode": mode, "results": results, "sweep": sweep, "efficiency_ratio": wins}
     if sweep:
         say("  report: convergence chart")

@@ -75,7 +75,8 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
 
   const images = data.images.map((entry) => ({
     name: entry.name, spp: entry.spp, seconds: entry.seconds, unit: entry.unit,
-    mean: decode(entry.mean), variance: decode(entry.variance),
+    // The reference's variance (and spp) are null where they are not known: another renderer's image.
+    mean: decode(entry.mean), variance: entry.variance ? decode(entry.variance) : null,
     flip: entry.flip ? decode(entry.flip) : null,
   }));
   const reference = images[0];
@@ -180,6 +181,10 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
         }
         return {values: efficiency(i, state.baseline)};
       case "variance":
+        if (!images[i].variance) {
+          return {why: "the reference's variance is not known (another renderer's image, without " +
+                       "variance channels or a sample count)"};
+        }
         return {values: logVariance(i)};
       default:
         return null;
@@ -406,7 +411,8 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
     baselineBox.value = state.baseline;
     const image = images[state.image];
     const time = image.seconds === null ? "" : `, ${format(image.seconds, 3)} ${image.unit}`;
-    caption.textContent = `${state.image + 1}: ${image.name} (${image.spp} spp${time}) — ` +
+    const spp = image.spp === null ? "spp unknown" : `${image.spp} spp`;
+    caption.textContent = `${state.image + 1}: ${image.name} (${spp}${time}) — ` +
       VIEWS.find((v) => v.id === state.view).title +
       (state.view === "image" ? `, exposure ${state.exposure >= 0 ? "+" : ""}${state.exposure}` : "");
   }
@@ -441,7 +447,7 @@ table.sortable th[data-order=descending]::after { content: " \\25BC"; }
     cells.reference.textContent = triple(reference.mean, p);
     cells.error.textContent = compared ? error.map((e) => format(e, 7)).join(" ") : "n/a";
     cells.relerr.textContent = compared ? format(relerr(i)[p], 7) : "n/a";
-    cells.variance.textContent = triple(image.variance, p);
+    cells.variance.textContent = image.variance ? triple(image.variance, p) : "n/a";
     cells.flip.textContent = image.flip ? format(image.flip[p], 7) : "n/a";
     const against = state.baseline;
     const timed = compared && against > 0 && against !== i && image.seconds > 0 && images[against].seconds > 0;

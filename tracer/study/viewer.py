@@ -31,12 +31,12 @@ from typing import Any
 import numpy as np
 
 from ..atomic import atomic_write, write_text
-from ..film import Film
 from . import metrics
+from .reference import Reference
 
 DATA_FILE = "viewer_data.js"
 SCRIPT_FILE = "viewer.js"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: the reference's spp and variance may be null (another renderer's image)
 # The colour tables the map views use (each view's range is the static map's: report.RELERR_RANGE
 # and RATIO_RANGE; the variance's comes from the data).
 COLORMAPS = ("magma", "RdBu")
@@ -78,18 +78,19 @@ def _log_variance_range(variances: list[np.ndarray]) -> list[float]:
     return [low, high if high > low else low + 1.0]
 
 
-def viewer_data(scene: str, reference: Film, images: list[dict[str, Any]], exposure: float,
+def viewer_data(scene: str, reference: Reference, images: list[dict[str, Any]], exposure: float,
                 relerr_range: tuple[float, float], ratio_range: float,
                 baseline: int | None) -> dict[str, Any]:
     """The document ``viewer_data.js`` assigns, its arrays still float32 arrays (:func:`write_viewer`
     packs them as it writes). ``images``: one dict per compared render, in the report's order,
     with ``name``, ``film``, ``seconds``, ``unit`` (``s`` or ``CPU s``) and ``flip`` (an ``(H, W)``
     map); ``baseline``: the index among them of the efficiency view's default comparison (None:
-    the first)."""
+    the first). The reference's ``spp`` and ``variance`` are null where they are not known
+    (another renderer's image: ``reference.Reference``)."""
     h, w = reference.height, reference.width
+    variance = None if reference.pixel_variance is None else _float32(reference.pixel_variance)
     entries = [{"name": "reference", "spp": reference.spp, "seconds": None, "unit": "",
-                "mean": _float32(reference.image()), "variance": _float32(reference.variance_of_mean()),
-                "flip": None}]
+                "mean": _float32(reference.image()), "variance": variance, "flip": None}]
     for image in images:
         film = image["film"]
         if (film.height, film.width) != (h, w):
@@ -110,7 +111,8 @@ def viewer_data(scene: str, reference: Film, images: list[dict[str, Any]], expos
             "flip": {"range": [0.0, 1.0], "colormap": "magma", "label": "FLIP error (OpenImageIO)"},
             "efficiency": {"range": [-float(ratio_range), float(ratio_range)], "colormap": "RdBu",
                            "label": "log2 efficiency ratio (blue: this image wins)"},
-            "variance": {"range": _log_variance_range([e["variance"] for e in entries]), "colormap": "magma",
+            "variance": {"range": _log_variance_range([e["variance"] for e in entries
+                                                        if e["variance"] is not None]), "colormap": "magma",
                          "label": "log10 variance of the pixel mean (σ²/spp), mean of RGB"},
         },
         "colormaps": {name: colormap_table(name) for name in COLORMAPS},
