@@ -41,6 +41,11 @@ def write_scene(scene: Scene, path: str | os.PathLike[str], source: str | None =
     (an earlier conversion's) and must not be one the scene itself reads (``_inputs``), so that
     converting never overwrites an input or a user's own file. Raises InputError if the scene
     cannot be written as TOML."""
+    if scene.textures:
+        # The TOML format has no textures yet: writing their means would render another image.
+        names = sorted({b.param for b in scene.textures.bindings})
+        raise InputError(f"the scene has textures ({', '.join(names)}), which tracer's TOML format does not "
+                         "hold yet: render the XML scene itself", str(scene.path))
     target = Path(path)
     inputs = _inputs(scene)
     taken: set[Path] = set()
