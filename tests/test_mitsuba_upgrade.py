@@ -261,6 +261,21 @@ def test_snake_case_is_mitsubas(written, upgraded):
     assert snake_case(written) == upgraded
 
 
+def test_uv_offsets_and_scales_become_mitsubas_to_uv(tmp_path):
+    # Mitsuba 3 makes uoffset & co. the transform scale(uscale, vscale) translate(uoffset,
+    # voffset): the 0.6 texture is the 3.0 one with that matrix, digest for digest.
+    texture = ('<shape type="rectangle"><bsdf type="diffuse"><texture name="reflectance" type="checkerboard">'
+               '{uv}</texture></bsdf></shape><emitter type="point"><point name="position" x="0" y="0" z="2"/>'
+               '</emitter>')
+    old = old_scene(tmp_path / "old", texture.format(
+        uv='<float name="uoffset" value="0.25"/><float name="uscale" value="4"/><float name="vscale" value="2"/>'))
+    new = old_scene(tmp_path / "new", texture.format(
+        uv='<transform name="to_uv"><matrix value="4 0 0 1  0 2 0 0  0 0 1 0  0 0 0 1"/></transform>'),
+        version="3.0.0")
+    assert load_scene(old).digest == load_scene(new).digest
+    assert load_scene(old).textures.textures[0].to_uv.tolist() == [[4.0, 0.0, 1.0], [0.0, 2.0, 0.0]]
+
+
 def test_an_included_file_is_upgraded_by_its_own_version(tmp_path):
     """Mitsuba reads each file with its own version: a 0.6 file included by a 3.0 scene is
     upgraded, a 3.0 file included by a 0.6 scene is not."""
@@ -312,7 +327,7 @@ def test_messages_name_the_line_and_the_name_as_written(tmp_path):
     ('<shape type="sphere"><bsdf type="diffuse">\n<rgb name="reflectance" intent="illuminant" value="1"/>'
      '</bsdf></shape>', ["scene.xml:4:", "unexpected attribute 'intent'"]),
     ('<shape type="sphere"><bsdf type="plastic">\n<float name="uoffset" value="0.5"/></bsdf></shape>',
-     ["scene.xml:4:", "to_uv texture transform", "tracer reads no textures"]),
+     ["scene.xml:4:", "plastic has no property 'to_uv'"]),
     ('<shape type="sphere">\n<float name="radius" value="1"/><transform name="to_world"/>\n'
      '<transform name="toWorld"/></shape>',
      ['scene.xml:5: <transform name="toWorld">', "'toWorld' becomes 'to_world' in the upgrade of a version "

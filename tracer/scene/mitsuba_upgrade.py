@@ -19,8 +19,8 @@ copied; checked by loading scenes with Mitsuba 3.9.1):
   property of the new name yet (``Properties::rename_property``); otherwise it keeps the old
   name, which no Mitsuba 3 plugin reads, and refuses the scene ("unreferenced property"). tracer
   refuses it as it upgrades, naming both lines.
-- **uoffset, voffset, uscale, vscale** become a ``to_uv`` transform of the object. Only
-  textures read one, and tracer reads no textures: they are refused with one line.
+- **uoffset, voffset, uscale, vscale** become a ``to_uv`` transform of the object,
+  scale(uscale, vscale) times translate(uoffset, voffset), as in Mitsuba 3.
 
 What Mitsuba 3.9.1 does not upgrade it refuses, and so does tracer: ``<lookAt>`` (Mitsuba
 3.0 to 3.6 renamed it ``<lookat>``; 3.9.1 says "unexpected <lookAt> element"), ``<srgb>``,
@@ -42,7 +42,7 @@ import re
 from dataclasses import dataclass, field
 
 from ..errors import InputError, shown
-from .mitsuba_document import OBJECT_TAGS, Document, Element, numbers
+from .mitsuba_document import OBJECT_TAGS, Document, Element, number, numbers
 
 # Files of versions below this are upgraded (parser.cpp: version < util::Version(2, 0, 0)).
 FIRST_CURRENT_VERSION = (2, 0, 0)
@@ -91,7 +91,8 @@ class Upgrade:
 def upgrade_document(document: Document) -> Upgrade | None:
     """Upgrade, in place, the objects of every file of ``document`` whose version is below
     2.0.0, and refuse what Mitsuba 3.9.1 refuses in them. Returns what was done (None when no
-    file is old). Line numbers are kept: elements are renamed, never made anew."""
+    file is old). Line numbers are kept: elements are renamed, never made anew (but for the
+    ``to_uv`` made of uoffset & co., which takes the first one's line)."""
     old = {name: version for name, version in document.versions.items() if version < FIRST_CURRENT_VERSION}
     if not old:
         return None
@@ -125,12 +126,36 @@ def _upgrade_object(obj: Element, version: tuple[int, int, int], upgrade: Upgrad
         for child in named:
             if child.attrs["name"] == "diffuse_reflectance":
                 _rename(obj, child, "reflectance", holders, version)
+    _uv_transform(obj, [child for child in named if child.attrs["name"] in _UV_PROPERTIES], upgrade)
     for child in named:
         if child.attrs["name"] in _UV_PROPERTIES:
-            child.fail(f"{child.attrs['name']}: Mitsuba 3 makes uoffset, voffset, uscale and vscale a to_uv "
-                       "texture transform, and tracer reads no textures", obj)
+            continue
         if child.written_name is not None:
             upgrade.renamed.setdefault((child.written_name, child.attrs["name"]))
+
+
+def _uv_transform(obj: Element, given: list[Element], upgrade: Upgrade) -> None:
+    """``uoffset``, ``voffset``, ``uscale``, ``vscale`` made the one ``to_uv`` transform Mitsuba 3
+    makes of them (parser.cpp, ``upgrade_from_v1``): scale(uscale, vscale) times
+    translate(uoffset, voffset), so (u, v) -> (uscale (u + uoffset), vscale (v + voffset)). The
+    new ``<transform>`` is given the line of the first of them, for messages."""
+    if not given:
+        return
+    values = {"uoffset": 0.0, "voffset": 0.0, "uscale": 1.0, "vscale": 1.0}
+    for child in given:
+        if child.tag not in ("float", "integer"):
+            child.fail(f"'{child.attrs['name']}' is a float, not a {child.tag}", obj)
+        values[child.attrs["name"]] = number(child, child.attr("value"), child.attrs["name"])
+    if any(child.attrs.get("name") == "to_uv" for child in obj.children):
+        given[0].fail("uoffset, voffset, uscale and vscale beside a to_uv (Mitsuba 3 would replace it)", obj)
+    su, sv = values["uscale"], values["vscale"]
+    matrix = f"{su!r} 0 0 {su * values['uoffset']!r} 0 {sv!r} 0 {sv * values['voffset']!r} 0 0 1 0 0 0 0 1"
+    first = given[0]
+    transform = Element("transform", {"name": "to_uv"}, first.file, first.line,
+                        [Element("matrix", {"value": matrix}, first.file, first.line)])
+    obj.children = [c for c in obj.children if c not in given]
+    obj.children.insert(0, transform)
+    upgrade.renamed.setdefault(("uoffset/voffset/uscale/vscale", "to_uv"))
 
 
 def _rename(obj: Element, child: Element, new: str, holders: dict[str, tuple[Element, str]],
