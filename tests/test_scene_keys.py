@@ -16,16 +16,28 @@ CAMERA = {"origin": [0, 1, 4], "target": [0, 1, 0], "up": [0, 1, 0], "fov": 40, 
 def every_key_scene(tmp_path):
     """A scene that gives every declared key of every table (a mesh file for the mesh keys)."""
     mesh = tmp_path / "tri.obj"
-    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n")
+    import OpenImageIO as oiio
+
+    image = oiio.ImageBuf(oiio.ImageSpec(2, 2, 3, oiio.UINT8))
+    assert image.write(str(tmp_path / "t.png"))
     common = {"material": "m", "emission": [0, 0, 0]}
     return {
         "render": {"spp": 4, "strategy": "mis", "light_sampling": "area", "sampler": "independent"},
         "camera": CAMERA,
-        "materials": {"m": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5], "twosided": True}},
+        "materials": {
+            "m": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5], "twosided": True},
+            "checks": {"type": "diffuse", "reflectance": {"texture": "checkerboard", "color0": 0.9,
+                                                          "color1": [0.1, 0.2, 0.3], "to_uv": [[2, 0, 0], [0, 2, 0]]}},
+            "image": {"type": "diffuse", "reflectance": {"texture": "bitmap", "file": "t.png", "raw": True,
+                                                         "filter": "nearest", "wrap": "clamp"}}},
         "shapes": [
-            {"type": "quad", "origin": [0, 0, 0], "edge1": [1, 0, 0], "edge2": [0, 0, -1], **common},
+            {"type": "quad", "origin": [0, 0, 0], "edge1": [1, 0, 0], "edge2": [0, 0, -1],
+             "uv": [[0, 0], [2, 0], [2, 2], [0, 2]], **common},
             {"type": "sphere", "center": [0, 1, 0], "radius": 0.5, "subdivisions": 1, **common},
-            {"type": "mesh", "file": mesh.name, "normals": "vertex", **common},
+            {"type": "sphere", "center": [0, 3, 0], "radius": 0.5, "uv_frame": [[0, 1, 0], [-1, 0, 0], [0, 0, 1]],
+             **common},
+            {"type": "mesh", "file": mesh.name, "normals": "vertex", "flip_v": True, **common},
         ],
         "lights": [{"type": "point", "position": [0, 2, 0], "intensity": [1, 1, 1]}],
     }
@@ -34,9 +46,11 @@ def every_key_scene(tmp_path):
 def test_every_declared_key_is_read(tmp_path):
     doc = every_key_scene(tmp_path)
     given = {"top level": set(doc), "[render]": set(doc["render"]), "[camera]": set(doc["camera"]),
-             "[materials.NAME]": {"type", "twosided"}}
+             "[materials.NAME]": {"type", "twosided"},
+             "a material parameter's texture": {key for m in doc["materials"].values()
+                                                for value in m.values() if isinstance(value, dict) for key in value}}
     for shape in doc["shapes"]:
-        given[f'[[shapes]] type = "{shape["type"]}"'] = set(shape)
+        given.setdefault(f'[[shapes]] type = "{shape["type"]}"', set()).update(shape)
     given['[[lights]] type = "point"'] = set(doc["lights"][0])
     for section in keys.SECTIONS:  # the scene above really gives every declared key
         assert set(section.names()) == given[section.header], section.header

@@ -8,6 +8,7 @@ Rendering with textures is compared with Mitsuba 3 itself in tests/test_mitsuba_
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -271,3 +272,62 @@ def test_a_bad_filter_or_wrap_mode_names_the_line(tmp_path, ):
         with pytest.raises(InputError, match=f"{key}: expected") as caught:
             _load(tmp_path, body)
         assert "scene.xml:4" in str(caught.value)
+
+
+TOML_CAMERA = {"origin": [0, 0, 4], "target": [0, 0, 0], "fov": 40, "width": 4, "height": 4}
+
+
+def test_a_toml_quad_is_textured_as_mitsubas_rectangle(tmp_path):
+    # The same parallelogram and checkerboard in both formats: the same corner coordinates
+    # (Mitsuba's rectangle: (0, 0) at o, (1, 0) at o + edge1) and the same texture rows.
+    xml = _load(tmp_path, '<shape type="rectangle"><bsdf type="diffuse"><texture name="reflectance" '
+                'type="checkerboard"><rgb name="color0" value="0.9"/><transform name="to_uv"><scale x="3" y="2"/>'
+                '</transform></texture></bsdf></shape>')
+    toml = tracer.load_scene({"camera": TOML_CAMERA, "materials": {"m": {"type": "diffuse", "reflectance": {
+        "texture": "checkerboard", "color0": 0.9, "to_uv": [[3, 0, 0], [0, 2, 0]]}}},
+        "shapes": [{"type": "quad", "origin": [-1, -1, 0], "edge1": [2, 0, 0], "edge2": [0, 2, 0], "material": "m"}],
+        "lights": [{"type": "point", "position": [0, 0, 3], "intensity": [1, 1, 1]}]})
+    np.testing.assert_array_equal(toml.corner_uv, xml.corner_uv)
+    a = toml.textures.arrays(2, toml.corner_uv, toml.sphere_frame)
+    b = xml.textures.arrays(2, xml.corner_uv, xml.sphere_frame)
+    np.testing.assert_array_equal(a.info, b.info)
+    np.testing.assert_array_equal(a.bindings, b.bindings)
+
+
+def _toml(tmp_path, material: dict, shape: dict | None = None):
+    return tracer.load_scene({"camera": TOML_CAMERA, "materials": {"m": material},
+                              "shapes": [shape or {"type": "quad", "origin": [-1, -1, 0], "edge1": [2, 0, 0],
+                                                   "edge2": [0, 2, 0], "material": "m"}]}, base_dir=tmp_path)
+
+
+@pytest.mark.parametrize("material, shape, words", [
+    ({"type": "diffuse", "reflectance": {"texture": "bitmap", "file": "nope.png"}}, None,
+     "materials.m.reflectance.file: texture image not found"),
+    ({"type": "diffuse", "reflectance": {"texture": "bitmap", "file": "t.png", "filtr": "nearest"}}, None,
+     "unknown key 'filtr' (did you mean 'filter'?)"),
+    ({"type": "diffuse", "reflectance": {"texture": "noise"}}, None, "expected one of checkerboard, bitmap"),
+    ({"type": "plastic", "int_ior": {"texture": "checkerboard"}}, None, "materials.m.int_ior: expected a number"),
+    ({"type": "diffuse", "reflectance": {"texture": "checkerboard", "to_uv": [[1, 0], [0, 1]]}}, None,
+     "expected 2 lists of 3 numbers"),
+    ({"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]},
+     {"type": "sphere", "center": [0, 0, 0], "radius": 1, "uv_frame": [[2, 0, 0], [0, 1, 0], [0, 0, 1]]},
+     "uv_frame: expected the rows of a rotation"),
+    ({"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]},
+     {"type": "sphere", "center": [0, 0, 0], "radius": 1, "subdivisions": 1, "uv_frame": [[1, 0, 0]] * 3},
+     "uv_frame is a true sphere's"),
+])
+def test_toml_textures_are_checked_naming_the_key(tmp_path, material, shape, words):
+    import OpenImageIO as oiio
+
+    _write(tmp_path / "t.png", np.zeros((2, 2, 3), dtype=np.uint8), oiio.UINT8)
+    with pytest.raises(InputError, match=re.escape(words)) as caught:
+        _toml(tmp_path, material, shape)
+    assert "\n" not in str(caught.value)
+
+
+def test_flip_v_turns_a_mesh_files_coordinates(tmp_path):
+    (tmp_path / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0.25\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n")
+    material = {"type": "diffuse", "reflectance": {"texture": "checkerboard"}}
+    for flip, expected in ((False, [0, 0.25, 1, 0, 0, 1]), (True, [0, 0.75, 1, 1, 0, 0])):
+        scene = _toml(tmp_path, material, {"type": "mesh", "file": "tri.obj", "material": "m", "flip_v": flip})
+        np.testing.assert_allclose(scene.corner_uv, [expected])

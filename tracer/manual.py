@@ -159,8 +159,9 @@ def plugins_page() -> str:
             for m in registered.values():
                 out.append(f"### {m.name}\n")
                 out.append(f"{m.doc} (module `{m.module}`).\n")
-                rows = [(code(p.name), "number" if p.size == 1 and not (p.choices or p.boolean)
-                         else ("name" if p.choices else "boolean" if p.boolean else f"{p.size} numbers"),
+                rows = [(code(p.name), ("number" if p.size == 1 and not (p.choices or p.boolean)
+                         else ("name" if p.choices else "boolean" if p.boolean else f"{p.size} numbers"))
+                         + (" or a texture" if p.texture else ""),
                          _param_range(p), _param_default(p), p.doc) for p in m.params]
                 rows.append((code("twosided"), "boolean", "true or false", "true",
                              "reflects on both sides (false: black from behind)"))

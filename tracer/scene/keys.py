@@ -78,6 +78,22 @@ MATERIAL = Section("[materials.NAME]", "One material; NAME is any TOML key, whic
     Key("twosided", "boolean", "true", "reflects on both sides; false: black seen from behind"),
 ))
 
+TEXTURE = Section("a material parameter's texture", "Any parameter the plug-in page marks "
+                  "`texture` may be an inline table instead of a value: `reflectance = { texture = "
+                  "\"bitmap\", file = \"wood.png\" }`. Coordinates (u, v) are Mitsuba's (SCENE_FORMAT.md).", (
+    Key("texture", "string", REQUIRED, "checkerboard or bitmap"),
+    Key("color0", "number or 3 numbers", "0.4", "checkerboard: where the fractional parts of u and v are "
+        "both above 1/2 or both not (a one-number parameter swaps the colours, as Mitsuba does)"),
+    Key("color1", "number or 3 numbers", "0.2", "checkerboard: elsewhere"),
+    Key("file", "string", REQUIRED + " (bitmap)", "bitmap: an image OpenImageIO reads, relative to the "
+        "scene file; 8- and 16-bit images are sRGB-decoded unless raw, float images are linear"),
+    Key("raw", "boolean", "false", "bitmap: take integer images' values as they are"),
+    Key("filter", "string", "bilinear", "bitmap: bilinear or nearest"),
+    Key("wrap", "string", "repeat", "bitmap: repeat, mirror or clamp beyond [0, 1]"),
+    Key("to_uv", "2 rows of 3 numbers", "[[1, 0, 0], [0, 1, 0]]", "(u, v) -> (a u + b v + c, d u + e v + f) "
+        "before the lookup"),
+))
+
 _SHAPE_COMMON = (
     Key("type", "string", REQUIRED, "quad, sphere or mesh"),
     Key("material", "string", "none (black)", "the NAME of a [materials.NAME] table"),
@@ -90,6 +106,8 @@ QUAD = Section("[[shapes]] type = \"quad\"", "A parallelogram of two triangles; 
     Key("origin", VEC3, REQUIRED, "corner o"),
     Key("edge1", VEC3, REQUIRED, "the corners are o, o + edge1, o + edge1 + edge2, o + edge2"),
     Key("edge2", VEC3, REQUIRED, "see edge1"),
+    Key("uv", "4 pairs of numbers", "[[0, 0], [1, 0], [1, 1], [0, 1]]", "texture coordinates at the "
+        "corners o, o + edge1, o + edge1 + edge2, o + edge2"),
 ))
 
 SPHERE = Section("[[shapes]] type = \"sphere\"", "A true sphere, intersected exactly, emitting from "
@@ -98,6 +116,8 @@ SPHERE = Section("[[shapes]] type = \"sphere\"", "A true sphere, intersected exa
     Key("radius", "number > 0", REQUIRED, "at least 1e-6 times the largest centre coordinate"),
     Key("subdivisions", "integer 0 .. 7", "none (a true sphere)", "an icosphere of 20 * 4^s "
         "triangles instead"),
+    Key("uv_frame", "3 rows of 3 numbers", "the world's axes", "a true sphere's texture frame: the "
+        "rows are its local x, y, z axes in world coordinates (u = φ/2π about z from x, v = θ/π)"),
 ))
 
 MESH = Section("[[shapes]] type = \"mesh\"", "A triangle mesh file read by trimesh (.ply, .obj, "
@@ -105,6 +125,8 @@ MESH = Section("[[shapes]] type = \"mesh\"", "A triangle mesh file read by trime
     Key("file", "string", REQUIRED, "the mesh file, relative to the scene file's folder"),
     Key("normals", "string", "face", "face: flat shading with each triangle's normal; vertex: "
         "the file's vertex normals (or angle-weighted ones) interpolated"),
+    Key("flip_v", "boolean", "false", "turn the file's texture coordinate v into 1 - v (what Mitsuba "
+        "does to OBJ files by default)"),
 ))
 
 POINT_LIGHT = Section("[[lights]] type = \"point\"", "A point light: a delta light, seen by light "
@@ -118,4 +140,4 @@ POINT_LIGHT = Section("[[lights]] type = \"point\"", "A point light: a delta lig
 SHAPE = Section("[[shapes]]", "Keys of every shape.", _SHAPE_COMMON)
 SHAPES = {"quad": QUAD, "sphere": SPHERE, "mesh": MESH}
 # Every section, in the order the reference lists them.
-SECTIONS = (TOP, RENDER, CAMERA, MATERIAL, QUAD, SPHERE, MESH, POINT_LIGHT)
+SECTIONS = (TOP, RENDER, CAMERA, MATERIAL, TEXTURE, QUAD, SPHERE, MESH, POINT_LIGHT)

@@ -28,7 +28,7 @@ from ..camera import Camera
 from ..errors import InputError, one_line, shown
 from ..materials import conductor, plastic
 from ..record import MAX_SAMPLE_INDEX
-from ..textures import FILTERS, WRAPS, Binding, Texture
+from ..textures import FILTERS, WRAPS, Texture, bind
 from ..textures.bitmap import read_texels
 from . import spectrum
 from .mesh import MeshError, angle_weighted_normals, read_mesh_file
@@ -784,34 +784,12 @@ class _SceneReader:
 
     def bind_textures(self, row: int, type_name: str, values: dict[str, object]) -> dict[str, object]:
         """``values`` with each texture replaced by its mean, the texture bound to the parameter
-        in the geometry's texture table (``tracer.textures``)."""
-        if not any(isinstance(v, Texture) for v in values.values()):
-            return values
-        kind = materials.TYPES[type_name]
-        table = self.geometry.textures
-        out = dict(values)
-        for param in kind.params:
-            texture = values.get(param.name)
-            if not isinstance(texture, Texture):
-                continue
-            if not param.texture:
-                raise InputError(f"{type_name}'s {param.name} cannot be a texture ({texture.source})",
-                                 self.document.path)
-            lo = -math.inf if param.lo is None else param.lo
-            hi = math.inf if param.hi is None else param.hi
-            low, high = texture.value_range()
-            if low < lo or high > hi:
-                self.notes.append(f"{texture.source}: the texture's values ({low:.4g} .. {high:.4g}) are "
-                                  f"clamped into {param.name}'s range ({lo:g} .. {hi:g})")
-            index = next((i for i, t in enumerate(table.textures) if t is texture), None)
-            if index is None:
-                index = table.add(texture)
-            table.bindings.append(Binding(row, param.name, kind.column(param.name), param.size, index,
-                                          lo, hi))
-            out[param.name] = np.clip(texture.mean(param.size), lo, hi)
-            if param.size == 1:
-                out[param.name] = float(out[param.name][0])
-        return out
+        in the geometry's texture table (``tracer.textures.bind``)."""
+        try:
+            return bind(self.geometry.textures, row, materials.TYPES[type_name], values, self.document.path,
+                        self.notes)
+        except ValueError as exc:
+            raise InputError(str(exc), self.document.path) from None
 
     def unique(self, name: str) -> str:
         candidate, i = name, 2

@@ -23,7 +23,8 @@ from ..camera import Camera
 from ..errors import InputError
 from ..inputfiles import read_regular_file
 from ..record import MAX_SAMPLE_INDEX
-from ..textures import TextureTable
+from ..textures import FILTERS, WRAPS, Texture, TextureTable, bind
+from ..textures.bitmap import read_texels
 from . import keys
 from .icosphere import unit_icosphere
 from .mesh import Mesh, MeshError, angle_weighted_normals, read_mesh_file
@@ -81,8 +82,8 @@ def scene_from_document(doc: Any, path: str, base: Path, width: int | None = Non
     top = _Reader(path, "", doc, keys.TOP)
     render = _read_render(_Reader(path, "render", top.raw("render", {}), keys.RENDER))
     camera = _read_camera(_Reader(path, "camera", top.raw("camera"), keys.CAMERA), width, height)
-    table = _read_materials(path, top.raw("materials", {}))
     geometry = _Geometry()
+    table = _read_materials(path, top.raw("materials", {}), base, geometry.textures)
     shapes = top.raw("shapes", [])
     if not isinstance(shapes, list):
         top.fail("expected an array of tables ([[shapes]])", "shapes")
@@ -309,18 +310,21 @@ def _read_camera(r: _Reader, width: int | None, height: int | None) -> Camera:
     return Camera(origin, target, up, fov, int(w), int(h), mirrored=bool(mirrored))
 
 
-def _read_materials(path: str, table: Any) -> materials.MaterialTable:
+def _read_materials(path: str, table: Any, base: Path, textures: TextureTable) -> materials.MaterialTable:
     top = _Reader(path, "materials", table, extra=tuple(table) if isinstance(table, dict) else ())
     triples = []
     sides: list[bool] = []
-    for name in table:
+    for row, name in enumerate(table, start=1):  # row 0 is the black material
         m = _Reader(path, f"materials.{name}", top.raw(name), keys.MATERIAL)
         kind = materials.TYPES[m.string("type", tuple(materials.TYPES))]
         m.expect(keys.MATERIAL, tuple(p.name for p in kind.params))
         values: dict[str, object] = {}
         for p in kind.params:
             default = ... if p.default is None else p.default
-            if p.choices:
+            if p.texture and isinstance(m.raw(p.name, None), dict):
+                values[p.name] = _read_texture(_Reader(path, f"materials.{name}.{p.name}", m.raw(p.name),
+                                                       keys.TEXTURE), base, p.size)
+            elif p.choices:
                 values[p.name] = m.string(p.name, p.choices, default=default)
             elif p.boolean:
                 values[p.name] = m.boolean(p.name, default=default)
@@ -331,6 +335,10 @@ def _read_materials(path: str, table: Any) -> materials.MaterialTable:
                                           hi=p.hi)
         sides.append(m.boolean("twosided", default=True))
         m.done()
+        try:
+            values = bind(textures, row, kind, values, path)
+        except ValueError as exc:  # unreachable: only texture parameters read a table above
+            m.fail(str(exc))
         triples.append((name, kind.name, values))
     top.done()
     try:
@@ -341,6 +349,8 @@ def _read_materials(path: str, table: Any) -> materials.MaterialTable:
 
 # The corner coordinates of a triangle without texture coordinates: (u, v) is then (b1, b2).
 NO_UV = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 1.0])
+# A quad's texture coordinates at o, o + edge1, o + edge1 + edge2, o + edge2 (Mitsuba's rectangle).
+QUAD_UV = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
 
 class _Geometry:
@@ -466,6 +476,7 @@ def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Ge
         record: dict[str, Any] = {"origin": o, "edge1": e1, "edge2": e2}
         vertices = np.stack([o, o + e1, o + e1 + e2, o + e2])
         faces = np.array([[0, 1, 2], [0, 2, 3]])
+        corner_uv = _rows(r, "uv", 4, 2, QUAD_UV.tolist())[faces].reshape(-1, 6)
     elif shape_type == "sphere":
         center = _position(r, "center")
         radius = r.number("radius", lo=0.0, lo_open=True, hi=MAX_COORDINATE)
@@ -474,25 +485,71 @@ def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Ge
             r.fail(f"radius {radius:g} is below what float32 resolves at the centre "
                    f"(at least 1e-6 times the largest centre coordinate, and 1e-30)", "radius")
         if not r.has("subdivisions"):  # a true sphere, intersected exactly
+            frame = _rows(r, "uv_frame", 3, 3, np.eye(3).tolist())
+            if np.max(np.abs(frame @ frame.T - np.eye(3))) > 1e-6 or np.linalg.det(frame) < 0.0:
+                r.fail("expected the rows of a rotation (orthonormal, right-handed)", "uv_frame")
             r.done()
-            geometry.add_sphere({"center": center, "radius": radius}, material, emission)
+            geometry.add_sphere({"center": center, "radius": radius}, material, emission, frame)
             return
+        if r.has("uv_frame"):
+            r.raw("uv_frame")
+            r.fail("uv_frame is a true sphere's (an icosphere's texture coordinates are its triangles' "
+                   "barycentrics)", "uv_frame")
         subdivisions = r.number("subdivisions", lo=0, hi=7, integer=True)
         record = {"center": center, "radius": radius, "subdivisions": subdivisions}
         vertices, faces = _icosphere(subdivisions, radius, center)
+        corner_uv = None  # an icosphere's texture coordinates: the barycentrics
     else:
         file = r.string("file")
         shading = r.string("normals", ("face", "vertex"), default="face")
         record = {"file": str(base / file)}
         mesh = _read_mesh(r, base / file)
-        vertices, faces = mesh.vertices, mesh.faces
+        vertices, faces, corner_uv = mesh.vertices, mesh.faces, mesh.corner_uv
+        if r.boolean("flip_v", default=False) and corner_uv is not None:
+            corner_uv = corner_uv.copy()
+            corner_uv[:, 1::2] = 1.0 - corner_uv[:, 1::2]
         if shading == "vertex":  # the file's vertex normals, else Mitsuba's angle-weighted ones
             normals = mesh.normals if mesh.normals is not None else angle_weighted_normals(vertices, faces)
             r.done()
-            geometry.add(shape_type, record, vertices, faces, material, emission, normals)
+            geometry.add(shape_type, record, vertices, faces, material, emission, normals, corner_uv)
             return
     r.done()
-    geometry.add(shape_type, record, vertices, faces, material, emission)
+    geometry.add(shape_type, record, vertices, faces, material, emission, corner_uv=corner_uv)
+
+
+def _read_texture(r: _Reader, base: Path, size: int) -> Texture:
+    """A material parameter's texture table (``keys.TEXTURE``)."""
+    kind = r.string("texture", ("checkerboard", "bitmap"))
+    to_uv = _rows(r, "to_uv", 2, 3, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    if kind == "checkerboard":
+        def colour(name: str, default: float) -> np.ndarray:
+            value = r.raw(name, default)
+            return (np.full(3, r.number(name, default)) if not isinstance(value, list)
+                    else r.vector(name, 3))
+        texture = Texture("checkerboard", to_uv=to_uv, color0=colour("color0", 0.4),
+                          color1=colour("color1", 0.2), source=r.key)
+    else:
+        file = r.string("file")
+        raw = r.boolean("raw", default=False)
+        pixels = read_texels(base / file, raw, r.path, f"{r.key}.file")
+        texture = Texture("bitmap", to_uv=to_uv, pixels=pixels,
+                          filter=r.string("filter", FILTERS, default="bilinear"), wrap=r.string("wrap", WRAPS, default="repeat"), source=str(base / file), raw=raw)
+    r.done()
+    return texture
+
+
+def _rows(r: _Reader, name: str, count: int, size: int, default: Any) -> np.ndarray:
+    """``count`` rows of ``size`` finite numbers (a nested list)."""
+    value = r.raw(name, default)
+    if (not isinstance(value, list) or len(value) != count
+            or any(not isinstance(row, list) or len(row) != size
+                   or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in row)
+                   for row in value)):
+        r.fail(f"expected {count} lists of {size} numbers, got {_short(value)}", name)
+    rows = np.asarray(value, dtype=np.float64)
+    if not np.all(np.isfinite(rows)) or np.max(np.abs(rows)) > MAX_COORDINATE:
+        r.fail(f"expected finite numbers within +-{MAX_COORDINATE:g}", name)
+    return rows
 
 
 def _icosphere(subdivisions: int, radius: float, center: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -25,6 +25,7 @@ column depends on except through a mean.
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -169,6 +170,34 @@ class TextureTable:
         for b in self.bindings:
             h.update(f"{b.material} {b.param} {b.column} {b.size} {b.texture} {b.lo!r} {b.hi!r}\0".encode())
         return h.digest()
+
+
+def bind(table: TextureTable, row: int, kind, values: dict[str, object], where: str,
+         notes: list[str] | None = None) -> dict[str, object]:
+    """``values`` of material ``row`` (type ``kind``, a ``MaterialType``) with each texture
+    replaced by its mean clamped into the parameter's range, the texture bound to the parameter
+    in ``table``. A texture's values beyond the range are told in ``notes`` (lookups are clamped).
+    Raises ValueError for a parameter the type reads no texture for; ``where`` names the scene."""
+    out = dict(values)
+    for param in kind.params:
+        texture = values.get(param.name)
+        if not isinstance(texture, Texture):
+            continue
+        if not param.texture:
+            raise ValueError(f"{kind.name}'s {param.name} cannot be a texture ({texture.source or where})")
+        lo = -math.inf if param.lo is None else param.lo
+        hi = math.inf if param.hi is None else param.hi
+        low, high = texture.value_range()
+        if (low < lo or high > hi) and notes is not None:
+            notes.append(f"{texture.source or where}: the texture's values ({low:.4g} .. {high:.4g}) are "
+                         f"clamped into {param.name}'s range ({lo:g} .. {hi:g})")
+        index = next((i for i, t in enumerate(table.textures) if t is texture), None)
+        if index is None:
+            index = table.add(texture)
+        table.bindings.append(Binding(row, param.name, kind.column(param.name), param.size, index, lo, hi))
+        mean = np.clip(texture.mean(param.size), lo, hi)
+        out[param.name] = float(mean[0]) if param.size == 1 else mean
+    return out
 
 
 def empty_arrays(material_count: int) -> Textures:

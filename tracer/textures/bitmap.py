@@ -25,35 +25,36 @@ def srgb_to_linear(encoded: np.ndarray) -> np.ndarray:
     return np.where(encoded <= 0.04045, encoded / 12.92, ((encoded + 0.055) / 1.055) ** 2.4)
 
 
-def read_texels(path: Path, raw: bool, where: str) -> np.ndarray:
+def read_texels(path: Path, raw: bool, where: str, key: str | None = None) -> np.ndarray:
     """(H, W, 3) float32 linear texels of the image ``path``, row 0 its top. Raises InputError
-    naming ``where`` (the file and key that name the image) for a file that cannot be used."""
+    naming ``where`` and ``key`` (the scene file and key that name the image) for a file that
+    cannot be used."""
     import OpenImageIO as oiio
 
     if not path.is_file():
-        raise InputError(f"texture image not found: {path}", where)
+        raise InputError(f"texture image not found: {path}", where, key)
     image = oiio.ImageInput.open(str(path))
     if image is None:
         raise InputError(f"cannot read texture image {path}: {oiio.geterror().strip() or 'unknown format'}",
-                         where)
+                         where, key)
     try:
         spec = image.spec()
         width, height, channels = spec.width, spec.height, spec.nchannels
         if width <= 0 or height <= 0 or channels <= 0:
-            raise InputError(f"texture image {path} has no pixels", where)
+            raise InputError(f"texture image {path} has no pixels", where, key)
         if width * height > MAX_TEXELS:
             raise InputError(f"texture image {path} is {width}x{height}, more than {MAX_TEXELS} texels",
-                             where)
+                             where, key)
         integer = spec.format.basetype in (oiio.UINT8, oiio.INT8, oiio.UINT16, oiio.INT16)
         pixels = image.read_image(0, 0, 0, channels, oiio.FLOAT)
         if pixels is None:
-            raise InputError(f"cannot read texture image {path}: {image.geterror().strip()}", where)
+            raise InputError(f"cannot read texture image {path}: {image.geterror().strip()}", where, key)
     finally:
         image.close()
     pixels = np.asarray(pixels, dtype=np.float64).reshape(height, width, channels)
     colour = pixels[..., :1].repeat(3, axis=2) if channels < 3 else pixels[..., :3]
     if not np.all(np.isfinite(colour)):
-        raise InputError(f"texture image {path} has NaN or infinite texels", where)
+        raise InputError(f"texture image {path} has NaN or infinite texels", where, key)
     if integer and not raw:
         colour = srgb_to_linear(np.clip(colour, 0.0, 1.0))
     return np.ascontiguousarray(colour, dtype=np.float32)
