@@ -311,6 +311,35 @@ def compare(t_mean, t_var, t_count, ref: Reference) -> Comparison:
                       mean_t, mean_m, mean_se, mean_z, mean_p)
 
 
+def block_test(t_mean, t_var_of_mean, ref: Reference, block: int = 8) -> tuple[float, tuple]:
+    """The worst 8 x 8 block: each block's mean difference per channel over its standard error
+    (the pixels of a block are independent, so the variances of their means add; each channel
+    is tested on its own, never summed with the others, since a pixel's channels are not
+    independent), two-sided normal p (a block's mean of 64 independent pixels is close to
+    normal), Šidák over blocks x channels. ``t_var_of_mean`` (H, W, 3): the variance of each of
+    tracer's pixel means. Returns (family p, worst (row, column, channel, z))."""
+    from scipy import stats
+
+    height, width, _ = ref.mean.shape
+    var_tracer = t_var_of_mean
+    best_p, worst, m = 1.0, None, 0
+    for y in range(0, height - block + 1, block):
+        for x in range(0, width - block + 1, block):
+            window = (slice(y, y + block), slice(x, x + block))
+            d = t_mean[window].mean(axis=(0, 1)) - ref.mean[window].mean(axis=(0, 1))
+            summed = var_tracer[window].sum(axis=(0, 1)) + ref.var_of_mean[window].sum(axis=(0, 1))
+            se = np.sqrt(summed) / block**2
+            for c in range(3):
+                if se[c] <= 0.0:
+                    continue
+                m += 1
+                p = 2.0 * stats.norm.sf(abs(d[c]) / se[c])
+                if p < best_p:
+                    best_p, worst = p, (y, x, c, d[c] / se[c])
+    family = 1.0 - (1.0 - best_p) ** max(m, 1) if best_p > 1e-12 else m * best_p
+    return family, worst
+
+
 def render_tracer(name: str, ref: Reference, spp: int = TRACER_SPP, seed: int = TRACER_SEED):
     """tracer's render of scene `name` at the reference's resolution: the `tracer.Image`."""
     import tracer

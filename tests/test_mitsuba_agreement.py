@@ -112,6 +112,19 @@ def test_pixels_chi_square(name):
 
 
 @pytest.mark.parametrize("name", NAMES)
+def test_blocks_sidak(name):
+    """8 x 8 blocks: each block's mean difference per channel over its standard error (the
+    summed variances of the block's independent pixel means, both renderers; channels tested
+    one by one, since a pixel's channels are not independent), normal p, Sidak over blocks and
+    channels at the suite's 1%. Between the worst pixel and the image mean: catches a bias over
+    one object or one texture region that single pixels are too noisy to show."""
+    ref, image, c = rendered(name)
+    variance_of_mean = image.variance / np.maximum(image.count, 1)[..., None]
+    family_p, worst = mitsuba_xml.block_test(image.mean, variance_of_mean, ref)
+    assert family_p >= FAMILY_ALPHA, f"{name}: block at (row, column, channel, z) {worst}, family p {family_p:.2e}"
+
+
+@pytest.mark.parametrize("name", NAMES)
 def test_exact_pixels(name):
     """Pixel-channels where both renderers report zero variance (background, a light's interior
     seen directly, points no light reaches) are deterministic in both: they must agree to float32
