@@ -322,14 +322,10 @@ def test_solid_angle_matches_long_double_corner_formula(name):
     assert abs(sr.solid_angle(tuple(mirror), tuple(corner), tuple(eu), tuple(ev)) - omega) <= 2.0 * tol
 
 
-# very_grazing (a receiver 1e-6 above the rectangle's plane): the module's solid angle is 2.7e-11
-# relative off the exact value (mpmath at 50 digits, which dblquad matches to 1e-15), beyond this
-# test's 4e-14. Found on 2026-12-02 with numpy/numba/scipy as pip installs them today; it fails the
-# same way at the commit that last passed CI (66bfacf), so an environment change exposed it.
-# strict: the case fails the suite again once the module is accurate there, so the mark goes.
-_CUBATURE_CASES = [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason="2.7e-11 relative error at "
-                                                           "h = 1e-6: not yet found"))
-                   if n == "very_grazing" else n for n in list(CASES) + list(EXTREME)]
+# very_grazing was marked xfail on 2026-12-01 (2.7e-11 relative off the exact value in that
+# environment); in fresh environments since, the module is within the 4e-14 again (the strict
+# mark failed the suite as XPASS), so it is tested like the others.
+_CUBATURE_CASES = list(CASES) + list(EXTREME)
 
 
 @pytest.mark.parametrize("name", _CUBATURE_CASES)

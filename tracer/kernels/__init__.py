@@ -97,11 +97,13 @@ class FeatureSet:
 
     def widened(self) -> "FeatureSet":
         """This feature set with every registered material and light technique, ``shared``: the
-        build that renders of many scenes share (``shared_builds``)."""
+        build that renders of many scenes share (``shared_builds``). Textures stay as the scene
+        needs them: a textured scene's build is a second shared build, so that the many scenes
+        without textures keep compiling (and running) kernels without the lookups."""
         from dataclasses import replace
 
         return replace(self, materials=plugins.names("material"),
-                       light_techniques=plugins.names("light_technique"), shared=True, textures=True)
+                       light_techniques=plugins.names("light_technique"), shared=True)
 
     def describe(self) -> str:
         """One line of what is compiled: ``diffuse, roughconductor; triangle_area; power; ...``."""
