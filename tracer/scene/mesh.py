@@ -156,8 +156,8 @@ def _load(trimesh, mesh_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray 
     vertices, faces, normals, corner_uv, offset = [], [], [], [], 0
     for part in parts:
         v = np.asarray(part.get("vertices", np.zeros((0, 3))), dtype=np.float64).reshape(-1, 3)
-        f = fan_triangles(np.asarray(part.get("faces", np.zeros((0, 3))), dtype=np.int64).reshape(
-            -1, part["faces"].shape[-1] if np.ndim(part.get("faces")) == 2 else 3))
+        f = np.asarray(part.get("faces", np.zeros((0, 3))), dtype=np.int64)
+        f = fan_triangles(f.reshape(-1, f.shape[-1] if f.ndim == 2 else 3))
         n = part.get("vertex_normals")
         uv = getattr(part.get("visual"), "uv", None)
         vertices.append(v)
@@ -211,6 +211,8 @@ def _obj_corner_uv(text: str, corners: np.ndarray, mesh_path: Path) -> np.ndarra
     the text, since trimesh keeps one coordinate per vertex and an OBJ vertex may have several
     (a seam). A corner without one gets (0, 0). The faces are those trimesh read, in order:
     checked against ``corners`` (F, 3, 3), their positions."""
+    if not re.search(r"^[ \t]*vt[ \t]", text, re.MULTILINE):
+        return None  # no coordinates: no need to read the faces again
     positions: list[list[float]] = []
     coordinates: list[list[float]] = []
     position_index: list[int] = []

@@ -314,6 +314,7 @@ def _read_materials(path: str, table: Any, base: Path, textures: TextureTable) -
     top = _Reader(path, "materials", table, extra=tuple(table) if isinstance(table, dict) else ())
     triples = []
     sides: list[bool] = []
+    images: dict[tuple[str, bool], np.ndarray] = {}
     for row, name in enumerate(table, start=1):  # row 0 is the black material
         m = _Reader(path, f"materials.{name}", top.raw(name), keys.MATERIAL)
         kind = materials.TYPES[m.string("type", tuple(materials.TYPES))]
@@ -323,7 +324,7 @@ def _read_materials(path: str, table: Any, base: Path, textures: TextureTable) -
             default = ... if p.default is None else p.default
             if p.texture and isinstance(m.raw(p.name, None), dict):
                 values[p.name] = _read_texture(_Reader(path, f"materials.{name}.{p.name}", m.raw(p.name),
-                                                       keys.TEXTURE), base, p.size)
+                                                       keys.TEXTURE), base, images)
             elif p.choices:
                 values[p.name] = m.string(p.name, p.choices, default=default)
             elif p.boolean:
@@ -517,8 +518,9 @@ def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Ge
     geometry.add(shape_type, record, vertices, faces, material, emission, corner_uv=corner_uv)
 
 
-def _read_texture(r: _Reader, base: Path, size: int) -> Texture:
-    """A material parameter's texture table (``keys.TEXTURE``)."""
+def _read_texture(r: _Reader, base: Path, images: dict[tuple[str, bool], np.ndarray]) -> Texture:
+    """A material parameter's texture table (``keys.TEXTURE``); ``images`` holds the texels
+    already read, by (file, raw)."""
     kind = r.string("texture", ("checkerboard", "bitmap"))
     to_uv = _rows(r, "to_uv", 2, 3, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     if kind == "checkerboard":
@@ -531,9 +533,13 @@ def _read_texture(r: _Reader, base: Path, size: int) -> Texture:
     else:
         file = r.string("file")
         raw = r.boolean("raw", default=False)
-        pixels = read_texels(base / file, raw, r.path, f"{r.key}.file")
+        key = (str(base / file), raw)
+        if key not in images:  # one read of a file however many materials use it
+            images[key] = read_texels(base / file, raw, r.path, f"{r.key}.file")
+        pixels = images[key]
         texture = Texture("bitmap", to_uv=to_uv, pixels=pixels,
-                          filter=r.string("filter", FILTERS, default="bilinear"), wrap=r.string("wrap", WRAPS, default="repeat"), source=str(base / file), raw=raw)
+                          filter=r.string("filter", FILTERS, default="bilinear"),
+                          wrap=r.string("wrap", WRAPS, default="repeat"), source=str(base / file), raw=raw)
     r.done()
     return texture
 

@@ -81,12 +81,18 @@ def _texel(pixels, offset: int, width: int, i: int, j: int, c: int) -> float:
 
 
 @jit
+def _to_uv(info, t: int, u: float, v: float):
+    """(u, v) mapped by texture ``t``'s ``to_uv``."""
+    m = TO_UV
+    return (info[t, m] * u + info[t, m + 1] * v + info[t, m + 2],
+            info[t, m + 3] * u + info[t, m + 4] * v + info[t, m + 5])
+
+
+@jit
 def evaluate(textures, t: int, u: float, v: float):
     """Texture ``t``'s RGB value at (u, v), before any one-number reduction."""
     info = textures.info
-    m = TO_UV
-    su = info[t, m] * u + info[t, m + 1] * v + info[t, m + 2]
-    sv = info[t, m + 3] * u + info[t, m + 4] * v + info[t, m + 5]
+    su, sv = _to_uv(info, t, u, v)
     if int(info[t, KIND]) == CHECKERBOARD:
         first = (su - math.floor(su) > 0.5) == (sv - math.floor(sv) > 0.5)
         column = COLOR0 if first else COLOR1
@@ -127,9 +133,7 @@ def evaluate_one(textures, t: int, u: float, v: float) -> float:
     luminance."""
     info = textures.info
     if int(info[t, KIND]) == CHECKERBOARD:
-        m = TO_UV
-        su = info[t, m] * u + info[t, m + 1] * v + info[t, m + 2]
-        sv = info[t, m + 3] * u + info[t, m + 4] * v + info[t, m + 5]
+        su, sv = _to_uv(info, t, u, v)
         first = (su - math.floor(su) > 0.5) != (sv - math.floor(sv) > 0.5)
         return info[t, COLOR0 if first else COLOR1]
     r, g, b = evaluate(textures, t, u, v)
