@@ -388,6 +388,9 @@ def test_an_interrupt_dropped_while_the_driver_waits_still_stops_the_render(clie
     assert result.interrupted and 0 < result.film.spp < settings.spp
 
 
+# CI budget: 120 s by design (default-size tasks take about 13 s each); the smaller interrupt
+# tests of this module keep the finished-task rule in every run.
+@pytest.mark.slow
 def test_ctrl_c_of_a_huge_distributed_reference_keeps_finished_tasks(tmp_path):
     """``reference --spp 2^40 --workers 2`` with the default task size: leaves of 2^21 passes, so
     tasks are segments of them of at most cluster.TASK_RAYS rays (seconds each), and SIGINT once

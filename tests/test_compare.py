@@ -646,6 +646,9 @@ def test_compare_takes_a_list_of_light_samplings(tmp_path):
     assert (out / "efficiency_bsdf_vs_light.png").is_file()
 
 
+# CI budget: 130 s, nearly all of it compiling five builds (bvh and ris variants); the naming of
+# swept dimensions is checked in every run by the heuristics and samplers tests.
+@pytest.mark.slow
 def test_compare_takes_light_selections_and_ris_settings(tmp_path):
     """--light-selection power,bvh and --ris-candidates 2,4 --ris-sources light,light+bsdf are
     dimensions: each strategy that takes light samples runs with each selection, ris with each

@@ -139,6 +139,9 @@ def test_polygon_formula_matches_light_geometry():
     assert e == pytest.approx(0.01 / 100.0, rel=1e-3)
 
 
+# CI budget: 100 s (40,000 samples per strategy and point); the white-furnace tests check every
+# strategy's weights and counts in every run, this one the polygon light's pdf in -m slow runs.
+@pytest.mark.slow
 def test_every_strategy_matches_polygon_light_closed_form(write_scene):
     """Each strategy's mean radiance at four plane points against rho/pi * E (closed form):
     a one-sample t-test per strategy x point x channel with 40,000 samples, Sidak-corrected over
