@@ -52,6 +52,7 @@ REFERENCES = {
     "transforms_focal": (96, 64, 32, 256),
     "textures": (96, 72, 32, 256),
     "textured_meshes": (96, 72, 32, 256),
+    "glass": (96, 72, 32, 256),
 }
 
 # tracer's side of the comparison (--compare and tests/test_mitsuba_agreement.py).

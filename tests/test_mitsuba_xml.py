@@ -809,10 +809,10 @@ def test_ior_names_are_mitsubas():
 
 
 @pytest.mark.parametrize("bsdf, words", [
-    ('<bsdf type="dielectric" id="glass"/>', ['<bsdf type="dielectric" id="glass">',
-                                               "dielectric is not supported", "direct light"]),
-    ('<bsdf type="roughdielectric"/>', ["roughdielectric is not supported"]),
-    ('<bsdf type="thindielectric"/>', ["thindielectric is not supported"]),
+    ('<bsdf type="roughdielectric" id="glass"/>', ['<bsdf type="roughdielectric" id="glass">',
+                                                    "roughdielectric is not supported", "transmission"]),
+    ('<bsdf type="dielectric"><float name="int_ior" value="0"/></bsdf>', ["int_ior", ">= 0.01, got 0"]),
+    ('<bsdf type="thindielectric"><string name="ext_ior" value="glas"/></bsdf>', ["unknown IOR name 'glas'"]),
     ('<bsdf type="principled"/>', ["bsdf 'principled' is not supported"]),
     ('<bsdf type="twosided"><bsdf type="diffuse"/><bsdf type="plastic"/></bsdf>', ["two different BSDFs"]),
     ('<bsdf type="twosided"/>', ["one nested bsdf"]),
@@ -1218,12 +1218,13 @@ def test_render_reference_compare_and_check_take_xml_scenes(tmp_path, capsys):
         == 0
     err = capsys.readouterr().err
     assert err.count("tracer: note:") == 4, err  # one per command
-    bad = write(tmp_path, '<shape type="cube">\n<bsdf type="dielectric" id="glass"/></shape>', name="bad.xml")
+    bad = write(tmp_path, '<shape type="cube">\n<bsdf type="roughdielectric" id="glass"/></shape>',
+                name="bad.xml")
     assert cli.main(["render", str(bad), "-o", str(tmp_path / "x.exr")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f'tracer: error: {bad}:4: <bsdf type="dielectric" id="glass">: dielectric is not '
-                   "supported (tracer renders direct light only: light through a dielectric arrives along "
-                   "paths of two or more bounces)"]
+    assert err == [f'tracer: error: {bad}:4: <bsdf type="roughdielectric" id="glass">: roughdielectric '
+                   "is not supported yet (tracer reads dielectric and thindielectric; a rough dielectric's "
+                   "transmission lobe is not written)"]
 
 
 def test_substitution_is_bounded_while_it_is_done(tmp_path):
@@ -1267,7 +1268,7 @@ def test_huge_names_give_short_lines_quickly(tmp_path):
 
     big = "m" * (8 << 20)
     cases = {
-        "id": f'<shape type="cube"><bsdf type="dielectric" id="{big}"/></shape>',
+        "id": f'<shape type="cube"><bsdf type="roughdielectric" id="{big}"/></shape>',
         "type": f'<shape type="cube"><bsdf type="{big}"/></shape>',
         "property": f'<shape type="cube"><float name="{big}" value="1"/></shape>',
         "ref": f'<shape type="cube"><ref id="{big}"/></shape>',

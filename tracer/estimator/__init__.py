@@ -77,12 +77,11 @@ class DirectLighting:
         # ris's BSDF candidates find their emitter without the occluders.
         self.emitter_rays = SceneRays(scene, emitters_only=True) \
             if self.combiner.resamples and strategy.direction_count else None
-        m = scene.materials
-        self.surfaces = Surfaces(np.ascontiguousarray(scene.hit_table), np.ascontiguousarray(m.kind),
-                                 np.ascontiguousarray(m.params, dtype=np.float64),
-                                 np.ascontiguousarray(m.twosided, dtype=np.bool_), float(scene.ray_epsilon),
-                                 int(scene.triangle_count), np.ascontiguousarray(scene.corner_normals),
-                                 scene.textures.arrays(len(m.kind), scene.corner_uv, scene.sphere_frame))
+        kind, params, behind = scene.materials.shading(plugins.by_code("material"))
+        self.surfaces = Surfaces(np.ascontiguousarray(scene.hit_table), kind, params, behind,
+                                 float(scene.ray_epsilon), int(scene.triangle_count),
+                                 np.ascontiguousarray(scene.corner_normals),
+                                 scene.textures.arrays(len(kind), scene.corner_uv, scene.sphere_frame))
         n_light, n_dir = strategy.light_count, strategy.direction_count
         one_sample = strategy.one_sample_mis
         total = 1.0 if one_sample else float(n_light + n_dir)

@@ -20,7 +20,8 @@ class Surfaces(NamedTuple):
 
     hit_table : (F + S, 16) per primitive (``Scene.hit_table``): geometry, emission, material row.
     material_kind : (K,) int8 material codes.   material_params : (K, W) their parameters.
-    twosided : (K,) bool, the material reflects on both sides (else black from behind).
+    behind : (K,) int64, the row that shades a hit seen from behind a material's shading
+        normal: its own, -1 (black from behind), or its other side's (``MaterialTable.shading``).
     eps : ray offset along the normal (``Scene.ray_epsilon``).
     first_sphere : F, the primitive id of the first analytic sphere.
     corner_normals : (F, 9) vertex normals of smooth triangles, or (0, 9) (``Scene.corner_normals``).
@@ -31,7 +32,7 @@ class Surfaces(NamedTuple):
     hit_table: np.ndarray
     material_kind: np.ndarray
     material_params: np.ndarray
-    twosided: np.ndarray
+    behind: np.ndarray
     eps: float
     first_sphere: int
     corner_normals: np.ndarray

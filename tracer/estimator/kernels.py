@@ -51,7 +51,7 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
     radiance, shadow, direction, reservoirs, lane_stats = out
     hit_table, kinds, params, eps = (surfaces.hit_table, surfaces.material_kind, surfaces.material_params,
                                      surfaces.eps)
-    first_sphere, twosided, corner_normals = surfaces.first_sphere, surfaces.twosided, surfaces.corner_normals
+    first_sphere, behind, corner_normals = surfaces.first_sphere, surfaces.behind, surfaces.corner_normals
     textures = surfaces.textures
     # A textured hit's material row, its textured columns set for that hit (``tracer.textures``).
     scratch = np.empty((1, params.shape[1]))
@@ -88,7 +88,7 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
         d = (float(dirs[lane, 0]), float(dirs[lane, 1]), float(dirs[lane, 2]))
         o = (float(origins[lane, 0]), float(origins[lane, 1]), float(origins[lane, 2]))
         reflects, cos_view, x, geometric, normal, s, t, wo, material, kind = shading_point.at_hit(
-            hit_table, first_sphere, kinds, twosided, corner_normals, p, o, d)
+            hit_table, first_sphere, kinds, behind, corner_normals, p, o, d)
 
         # The emitter seen directly (weight 1 in every strategy): front side only.
         if cos_view > 0.0:

@@ -5,10 +5,12 @@ the primitive a camera ray hit, the point (where the ray meets the triangle's pl
 sphere, in float64: Embree's own distance is float32), the geometric normal of the primitive's
 front, and, for a surface that reflects, the shading frame: z is the shading normal (the face
 normal, or for a smooth mesh the interpolation of its vertex normals at the hit), flipped
-toward the viewer for a two-sided material; a one-sided material seen from behind its shading
-normal reflects nothing (``MaterialTable.twosided``). The geometric normal, turned toward the
-viewer, decides what is geometric: which side emits, where rays start, the normal the light
-techniques see.
+toward the viewer for a two-sided material, whose hit from behind then shades with the row
+``behind`` names (the material's own, or for an interface with an inside, a row of its
+parameters seen from inside); a one-sided material seen from behind its shading normal
+reflects nothing (``MaterialTable.twosided``, ``MaterialTable.shading``). The geometric normal,
+turned toward the viewer, decides what is geometric: which side emits, where rays start, the
+normal the light techniques see.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from ..jit import jit
 
 
 @jit
-def at_hit(hit_table, first_sphere: int, kinds, twosided, corner_normals, p: int, o, d):
+def at_hit(hit_table, first_sphere: int, kinds, behind, corner_normals, p: int, o, d):
     """The shading point of the ray ``o + t d`` (d unit) that hit primitive ``p``:
     ``(reflects, cos_view, x, geometric, normal, s, t, wo, material, kind)``.
 
@@ -28,7 +30,7 @@ def at_hit(hit_table, first_sphere: int, kinds, twosided, corner_normals, p: int
     x : the point (world).   geometric : the face normal turned toward the viewer.
     normal, s, t : the shading frame (world unit vectors; normal is its z).
     wo : the direction toward the viewer in that frame (wo.z > 0).
-    material, kind : the material's row and code.
+    material, kind : the row that shades the hit (``behind`` from behind) and its code.
     reflects : False where nothing is reflected (no material, a grazing ray, a one-sided
         material seen from behind): the frame is then not computed."""
     x, face_normal, cos_d = surface_point(hit_table, first_sphere, p, o, d)
@@ -41,8 +43,9 @@ def at_hit(hit_table, first_sphere: int, kinds, twosided, corner_normals, p: int
     geometric = scale(1.0 if cos_view > 0.0 else -1.0, face_normal)
     normal = shading_normal(corner_normals, hit_table, first_sphere, p, x, face_normal)
     cos_shading = -dot(d, normal)
-    if cos_shading < 0.0 and twosided[material]:
+    if cos_shading < 0.0 and behind[material] >= 0:
         normal = scale(-1.0, normal)
+        material = int(behind[material])
     elif not cos_shading > 0.0:
         return False, cos_view, x, geometric, normal, nothing, nothing, nothing, material, kind
     s, t = basis(normal)

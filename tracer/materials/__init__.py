@@ -14,12 +14,16 @@ mirror            3     ``mirror.py``: ideal specular reflection (delta)
 conductor         4     ``conductor.py``: smooth metal, conductor Fresnel (delta)
 plastic           5     ``plastic.py``: diffuse base under a smooth coating (delta + diffuse)
 roughplastic      6     ``roughplastic.py``: diffuse base under a rough coating
+dielectric        7     ``dielectric.py``: smooth glass, delta reflection and refraction
+thindielectric    8     ``thindielectric.py``: a thin pane, delta reflection and transmission
 ================  ====  ==============================================================
 
 ``microfacet.py`` holds what the rough types share (distributions, visible-normal sampling,
 Fresnel terms); ``presets.py`` the named metals of Mitsuba scenes. A material is two-sided
 (TOML) or one-sided, black from behind its shading normal (Mitsuba's rule):
-``MaterialTable.twosided``, applied by the estimator, not by the types.
+``MaterialTable.twosided``, applied by the estimator, not by the types; a type whose sides
+differ (a dielectric's inside) declares ``behind``, and the estimator shades a hit from behind
+with a row of those parameters (``MaterialTable.shading``).
 
 Adding a material: one module here with ``CODE``, ``TYPE = register(MaterialType(...))``,
 ``eval_pdf`` and ``sample`` (found by ``plugins.discover``: nothing else to edit). The scene

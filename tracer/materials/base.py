@@ -99,12 +99,17 @@ class MaterialType(Plugin):
     derived : columns computed from the parameters once per material (tables, constants that
         kernels would otherwise recompute per sample), after the parameters in each row;
         ``derive(values) -> {name: value}`` fills them from the parameters by name.
+    behind : for a type whose two sides differ (an interface with an inside, ``dielectric``):
+        ``behind(values) -> values``, its parameters as seen from behind the shading normal. The
+        estimator shades a hit from behind with a row of those (``MaterialTable.shading``), so
+        that the type itself always sees ``wo.z > 0``.
     """
 
     params: tuple[Param, ...] = ()
     lobes: int = 0
     derived: tuple[Param, ...] = ()
     derive: Callable[[dict[str, object]], dict[str, object]] | None = None
+    behind: Callable[[dict[str, object]], dict[str, object]] | None = None
     dims: int = 3
     kind: str = "material"
 
@@ -143,6 +148,14 @@ class MaterialType(Plugin):
                 out[column: column + size] = np.broadcast_to(np.asarray(value, dtype=np.float64), (size,))
         return out
 
+    def values(self, row: np.ndarray) -> dict[str, object]:
+        """The parameters of ``row`` by name, as :meth:`row` takes them (choices as indices)."""
+        out: dict[str, object] = {}
+        for p in self.params:
+            column = self.column(p.name)
+            out[p.name] = float(row[column]) if p.size == 1 else row[column: column + p.size].copy()
+        return out
+
     def digest_width(self, row: np.ndarray) -> int:
         """How many leading columns of ``row`` a scene digest holds: all but the trailing
         ``late`` parameters that hold their defaults (and the derived columns, which follow
@@ -157,6 +170,13 @@ class MaterialType(Plugin):
                 break
             width -= p.size
         return width
+
+
+@jit
+def no_density(params, row, wo, wi):
+    """``eval_pdf`` of a type with delta lobes only: 0 and 0 for any given direction (no other
+    technique can hit a delta lobe)."""
+    return (0.0, 0.0, 0.0), 0.0
 
 
 @jit
@@ -186,6 +206,27 @@ class MaterialTable:
         if self.twosided is None:
             self.twosided = np.ones(len(self.kind), dtype=np.bool_)
         self.twosided = np.asarray(self.twosided, dtype=np.bool_)
+
+    def shading(self, types: dict[int, MaterialType]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The table as the kernels shade with it (``types`` by code): ``kind (K',)``, ``params
+        (K', W)`` and ``behind (K',)`` int64, the row a hit seen from behind a material's shading
+        normal shades with: the material's own (two-sided), -1 (one-sided: black from behind),
+        or, for a two-sided material whose type has ``behind``, a row appended after the K rows
+        of this table holding the parameters seen from that side."""
+        kind, params = list(self.kind), [row for row in self.params]
+        behind = np.where(self.twosided, np.arange(len(self.kind)), -1).astype(np.int64)
+        for m, code in enumerate(self.kind):
+            t = types.get(int(code))
+            if t is None or t.behind is None or not self.twosided[m]:
+                continue
+            back = np.zeros(self.params.shape[1])
+            back[:t.width] = t.row(t.behind(t.values(self.params[m])))
+            behind[m] = len(kind)
+            kind.append(code)
+            params.append(back)
+        behind = np.concatenate([behind, np.arange(len(self.kind), len(kind), dtype=np.int64)])
+        return (np.asarray(kind, dtype=np.int8), np.ascontiguousarray(np.array(params, dtype=np.float64)
+                                                                      .reshape(len(kind), -1)), behind)
 
     def digest_params(self, types: dict[int, MaterialType]) -> np.ndarray:
         """The parameter table as a scene digest holds it: each row up to its type's

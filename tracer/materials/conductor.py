@@ -19,7 +19,7 @@ from __future__ import annotations
 from ..jit import jit, jit_called
 from ..plugins import register
 from . import microfacet
-from .base import DELTA, MaterialType, Param, rgb
+from .base import DELTA, MaterialType, Param, no_density, rgb
 
 CODE = 4  # the dispatch code (``tracer.materials``)
 # Up to MAX_INDEX: 100 times the largest of Mitsuba's measured metals (Al: k 9.2), where F is 1
@@ -48,10 +48,7 @@ def fresnel_rgb(params, row, eta_column: int, k_column: int, cos: float):
             microfacet.fresnel_conductor(cos, eta[2], k[2]))
 
 
-@jit
-def eval_pdf(params, row, wo, wi):
-    """A delta lobe: 0 and 0 for any given direction."""
-    return (0.0, 0.0, 0.0), 0.0
+eval_pdf = no_density  # delta lobes only
 
 
 @jit

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from ..jit import jit
 from ..plugins import register
-from .base import DELTA, MaterialType, Param, rgb
+from .base import DELTA, MaterialType, Param, no_density, rgb
 
 CODE = 3  # the dispatch code (``tracer.materials``)
 TYPE = register(MaterialType(module=__name__, rank=CODE, name="mirror", code=CODE, lobes=DELTA,
@@ -24,10 +24,7 @@ TYPE = register(MaterialType(module=__name__, rank=CODE, name="mirror", code=COD
 REFLECTANCE = TYPE.column("reflectance")
 
 
-@jit
-def eval_pdf(params, row, wo, wi):
-    """A delta lobe: 0 and 0 for any given direction."""
-    return (0.0, 0.0, 0.0), 0.0
+eval_pdf = no_density  # delta lobes only
 
 
 @jit

@@ -69,7 +69,8 @@ DISK_SEGMENTS = 288
 RIGID_TOLERANCE = 1e-3
 
 _REFLECTANCES = ("reflectance", "diffuse_reflectance", "specular_reflectance")
-_READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided"})
+_READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided",
+                         "dielectric", "thindielectric"})
 _DIELECTRICS = frozenset({"dielectric", "roughdielectric", "thindielectric"})
 # Mitsuba 3.9.1's BSDF plugins (src/bsdfs/*.cpp): an unused declaration of one that tracer does
 # not read is accepted unread (it changes no image); any other type is unknown to Mitsuba too.
@@ -81,8 +82,8 @@ _UNSUPPORTED_ANYWHERE = {
     "phase": "participating media are not supported (tracer renders surfaces in vacuum)",
     "volume": "participating media are not supported (tracer renders surfaces in vacuum)",
 }
-_DIELECTRIC = ("{kind} is not supported (tracer renders direct light only: light through a dielectric "
-               "arrives along paths of two or more bounces)")
+_DIELECTRIC = ("{kind} is not supported yet (tracer reads dielectric and thindielectric; a rough "
+               "dielectric's transmission lobe is not written)")
 
 
 def read_mitsuba_scene(path: str, width: int | None = None, height: int | None = None,
@@ -718,7 +719,8 @@ class _SceneReader:
         type_name, values = self.bsdf_triple(inner)
         ident = bsdf.attrs.get("id") or inner.element.attrs.get("id")
         name = self.unique(ident or f"{inner.type}@{Path(inner.element.file).name}:{inner.element.line}")
-        row = self.add_material(name, type_name, values, twosided)
+        # Mitsuba's dielectrics shade both sides (an inside seen from behind: eta inverted).
+        row = self.add_material(name, type_name, values, twosided or type_name in _DIELECTRICS)
         self.rows[key] = row
         return row
 
@@ -806,7 +808,7 @@ class _SceneReader:
     def bsdf_triple(self, p: _Plugin) -> tuple[str, dict[str, object]]:
         """tracer's material type and parameters for the Mitsuba BSDF ``p`` (not twosided)."""
         kind = p.type
-        if kind in _DIELECTRICS:
+        if kind == "roughdielectric":
             p.fail(_DIELECTRIC.format(kind=kind))
         if kind == "diffuse":
             values: dict[str, object] = {
@@ -826,9 +828,15 @@ class _SceneReader:
                 "nonlinear": p.boolean("nonlinear", False)}
             if kind == "roughplastic":
                 values.update(self.roughness(p))
+        elif kind in ("dielectric", "thindielectric"):
+            values = {
+                "specular_reflectance": p.color("specular_reflectance", 1.0, "reflectance", hi=1.0),
+                "specular_transmittance": p.color("specular_transmittance", 1.0, "reflectance", hi=1.0),
+                "int_ior": self.ior(p, "int_ior", "bk7"),
+                "ext_ior": self.ior(p, "ext_ior", "air")}
         else:
             p.fail(f"bsdf '{shown(kind)}' is not supported; tracer reads diffuse, conductor, roughconductor, "
-                   "plastic, roughplastic and twosided")
+                   "plastic, roughplastic, dielectric, thindielectric and twosided")
         p.done()
         return kind, values
 
