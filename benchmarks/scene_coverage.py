@@ -5,7 +5,7 @@ that name would hide the ``coverage`` package, which numba imports when it is in
 
     python benchmarks/scene_coverage.py CORPUS [--jobs 2] [--timeout 600] [--out benchmarks/results]
 
-CORPUS is a folder holding the sources of `benchmarks/coverage_sources.toml`, each extracted
+CORPUS is a folder holding the sources of `benchmarks/scene_coverage_sources.toml`, each extracted
 into a subfolder named by its `folder` (see that file for how to fetch them; the scenes
 themselves are not committed). Every ``.xml`` file under a source's `scenes` folders whose root
 element is ``<scene>`` is a scene, except files that another file of the corpus includes
@@ -98,10 +98,11 @@ VERSION = re.compile(rb'<scene\b[^>]*\bversion\s*=\s*"(\d+)\.')
 # outcome of each render is the measurement). Integrators are all read (told, not obeyed).
 READS = {
     "shape": {"obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk"},
-    "bsdf": {"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided"},
+    "bsdf": {"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided", "dielectric",
+             "thindielectric"},
     "emitter": {"area", "point"},
     "sensor": {"perspective"},
-    "texture": set(),
+    "texture": {"bitmap", "checkerboard"},
 }
 
 
