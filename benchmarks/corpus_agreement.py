@@ -31,16 +31,30 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import mitsuba_xml  # noqa: E402  (the statistics: one copy)
 
-INTEGRATOR = re.compile(r"<integrator\b[^>]*?/>|<integrator\b[^>]*?>.*?</integrator>", re.S)
+# An integrator's tags: self-closing, opening, closing (integrators nest: stokes wraps path).
+INTEGRATOR_TAG = re.compile(r"<integrator\b[^>]*?/>|<integrator\b[^>]*>|</integrator\s*>")
 RFILTER = re.compile(r"<rfilter\b[^>]*?/>|<rfilter\b[^>]*?>.*?</rfilter>", re.S)
 FILM = re.compile(r"(<film\b[^>]*?>)(.*?)(</film>)", re.S)
 SIDE = re.compile(r'(<integer\s+name="(width|height)"\s+value=")(\d+)(")')
 
 
+def without_integrators(text: str) -> str:
+    """``text`` less every integrator element, nested ones with the one that holds them."""
+    kept, start, depth = [], 0, 0
+    for tag in INTEGRATOR_TAG.finditer(text):
+        closing, alone = tag.group(0).startswith("</"), tag.group(0).endswith("/>")
+        if depth == 0 and not closing:
+            kept.append(text[start:tag.start()])
+        depth += 0 if alone else (-1 if closing else 1)
+        if depth == 0:
+            start = tag.end()
+    return "".join(kept) + text[start:]
+
+
 def rewrite(text: str, size: int) -> str:
     """A scene file's text with the direct integrator, a box filter and a film of longer side
     ``size`` (films with numeric sizes; others are left as they are)."""
-    text = INTEGRATOR.sub("", text)
+    text = without_integrators(text)
     if "<sensor" in text:
         text = re.sub(r"(<scene\b[^>]*>)", r'\1\n<integrator type="direct"/>', text, count=1)
 
