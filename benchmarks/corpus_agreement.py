@@ -36,6 +36,8 @@ INTEGRATOR_TAG = re.compile(r"<integrator\b[^>]*?/>|<integrator\b[^>]*>|</integr
 RFILTER = re.compile(r"<rfilter\b[^>]*?/>|<rfilter\b[^>]*?>.*?</rfilter>", re.S)
 FILM = re.compile(r"(<film\b[^>]*?>)(.*?)(</film>)", re.S)
 SIDE = re.compile(r'(<integer\s+name="(width|height)"\s+value=")(\d+)(")')
+# A film side given as a scene parameter ($res), and that parameter's default.
+SIDE_PARAMETER = re.compile(r'<integer\s+name="(?:width|height)"\s+value="\$(\w+)"')
 
 
 def without_integrators(text: str) -> str:
@@ -55,6 +57,19 @@ def rewrite(text: str, size: int) -> str:
     """A scene file's text with the direct integrator, a box filter and a film of longer side
     ``size`` (films with numeric sizes; others are left as they are)."""
     text = without_integrators(text)
+    # Film sides that are parameters ($res): their numeric defaults scaled by one factor, so
+    # that the longer side is ``size`` and the aspect ratio stays.
+    defaults = {}
+    for name in set(SIDE_PARAMETER.findall(text)):
+        pattern = re.compile(rf'(<default\s+name="{name}"\s+value=")(\d+)(")')
+        found = pattern.search(text)
+        if found is not None:
+            defaults[name] = (pattern, int(found.group(2)))
+    if defaults and max(v for _, v in defaults.values()) > size:
+        scale = size / max(v for _, v in defaults.values())
+        for pattern, value in defaults.values():
+            text = pattern.sub(lambda m, v=value: f"{m.group(1)}{max(1, round(v * scale))}{m.group(3)}",
+                               text, count=1)
     if "<sensor" in text:
         text = re.sub(r"(<scene\b[^>]*>)", r'\1\n<integrator type="direct"/>', text, count=1)
 
