@@ -53,6 +53,8 @@ REFERENCES = {
     "textures": (96, 72, 32, 256),
     "textured_meshes": (96, 72, 32, 256),
     "glass": (96, 72, 32, 256),
+    "environment": (96, 72, 32, 256),
+    "delta_lights": (96, 72, 32, 256),
 }
 
 # tracer's side of the comparison (--compare and tests/test_mitsuba_agreement.py).

@@ -13,7 +13,10 @@ element is ``<scene>`` is a scene, except files that another file of the corpus 
 
 Each scene is rendered as a user would render it, in its own process:
 
-    tracer render SCENE --width 64 --height 64 --spp 16 --quiet -o TMP/out.exr
+    tracer render SCENE --width 64 --height 64 --spp 16 -D spp=16 --quiet -o TMP/out.exr
+
+(``-D spp=16`` defines ``$spp``, which Mitsuba's documentation scenes leave to the command line,
+``mitsuba -D spp=...``.)
 
 with ``TRACER_KERNELS=shared`` so that one kernel build serves every scene. The outcome is
 
@@ -100,7 +103,7 @@ READS = {
     "shape": {"obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk"},
     "bsdf": {"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided", "dielectric",
              "thindielectric"},
-    "emitter": {"area", "point"},
+    "emitter": {"area", "point", "envmap", "constant"},
     "sensor": {"perspective"},
     "texture": {"bitmap", "checkerboard"},
 }
@@ -139,8 +142,9 @@ def render(scene: Path, timeout: float, spp: int, size: int) -> dict:
     env = dict(os.environ, TRACER_KERNELS="shared")
     with tempfile.TemporaryDirectory(prefix="coverage-") as folder:
         out = Path(folder) / "out.exr"
+        # -D spp=N: Mitsuba's documentation scenes leave $spp for the command line (mitsuba -D).
         command = [sys.executable, "-m", "tracer", "render", str(scene), "--width", str(size),
-                   "--height", str(size), "--spp", str(spp), "--quiet", "-o", str(out)]
+                   "--height", str(size), "--spp", str(spp), "-D", f"spp={spp}", "--quiet", "-o", str(out)]
         start = time.monotonic()
         try:
             done = subprocess.run(command, capture_output=True, text=True, timeout=timeout,

@@ -902,10 +902,9 @@ def test_emitter_defaults_and_forms(tmp_path):
 
 
 @pytest.mark.parametrize("body, words", [
-    ('<emitter type="envmap"/>', ["emitter 'envmap' is not supported", "environment lights"]),
-    ('<emitter type="constant"/>', ["emitter 'constant'"]),
-    ('<emitter type="directional"/>', ["directional lights"]),
-    ('<emitter type="spot"/>', ["spot lights"]),
+    ('<emitter type="envmap"/>', ["missing property 'filename'"]),
+    ('<emitter type="constant"/><emitter type="constant"/>', ["a second environment emitter"]),
+    ('<emitter type="projector"/>', ["projector lights"]),
     # Mitsuba: "Only one of the parameters 'position' and 'to_world' can be specified"
     ('<emitter type="point"><point name="position" value="1, 1, 1"/><transform name="to_world">'
      '<translate x="1"/></transform></emitter>', ["position or to_world"]),
@@ -1331,3 +1330,24 @@ def test_the_direct_integrator_is_not_reported_as_not_obeyed(tmp_path):
     notes: list[str] = []
     load_scene(path, notify=notes.append)
     assert notes == []
+
+
+def test_parameters_define_names_as_mitsubas_dash_d(tmp_path):
+    """``parameters`` (the command line's ``-D NAME=VALUE``) define a scene's ``$names`` over
+    its ``<default>``s, as Mitsuba's -D does; a scene that uses an undefined one is refused
+    without them and reads with them; a TOML scene refuses them."""
+    load_scene = tracer.load_scene
+    path = tmp_path / "scene.xml"
+    path.write_text('<scene version="3.0.0"><default name="fov" value="30"/>'
+                    '<sensor type="perspective"><float name="fov" value="$fov"/>'
+                    '<sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>'
+                    '</sensor></scene>')
+    with pytest.raises(InputError, match=r"undefined parameter \$spp"):
+        load_scene(str(path))
+    scene = load_scene(str(path), parameters={"spp": "7", "fov": "50"})
+    assert scene.render_defaults["spp"] == 7
+    assert load_scene(str(path), parameters={"spp": "7"}).camera.fov != scene.camera.fov
+    toml = tmp_path / "scene.toml"
+    toml.write_text('[camera]\norigin = [0, 0, 1]\ntarget = [0, 0, 0]\nup = [0, 1, 0]\nfov = 40\n')
+    with pytest.raises(InputError, match="for Mitsuba XML scenes"):
+        load_scene(str(toml), parameters={"spp": "7"})

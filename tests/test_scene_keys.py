@@ -39,7 +39,12 @@ def every_key_scene(tmp_path):
              **common},
             {"type": "mesh", "file": mesh.name, "normals": "vertex", "flip_v": True, **common},
         ],
-        "lights": [{"type": "point", "position": [0, 2, 0], "intensity": [1, 1, 1]}],
+        "lights": [{"type": "point", "position": [0, 2, 0], "intensity": [1, 1, 1]},
+                   {"type": "spot", "position": [0, 2, 0], "intensity": [1, 1, 1], "direction": [0, -1, 0],
+                    "cutoff_angle": 30.0, "beam_width": 10.0},
+                   {"type": "directional", "direction": [0, -1, 0], "irradiance": [1, 1, 1]}],
+        # radiance (a constant environment) excludes map: tests/test_environment.py reads it
+        "environment": {"map": "t.png", "scale": 2.0, "to_world": [[0, 0, 1], [0, 1, 0], [-1, 0, 0]]},
     }
 
 
@@ -51,7 +56,9 @@ def test_every_declared_key_is_read(tmp_path):
                                                 for value in m.values() if isinstance(value, dict) for key in value}}
     for shape in doc["shapes"]:
         given.setdefault(f'[[shapes]] type = "{shape["type"]}"', set()).update(shape)
-    given['[[lights]] type = "point"'] = set(doc["lights"][0])
+    for light in doc["lights"]:
+        given[f'[[lights]] type = "{light["type"]}"'] = set(light)
+    given["[environment]"] = set(doc["environment"]) | {"radiance"}
     for section in keys.SECTIONS:  # the scene above really gives every declared key
         assert set(section.names()) == given[section.header], section.header
     load_scene(doc, base_dir=tmp_path)

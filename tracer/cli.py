@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -295,6 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
     cv.add_argument("--width", type=_side, help="film width to convert at (a Mitsuba scene's field of view "
                     "follows its fov_axis; the TOML holds the vertical angle at this size)")
     cv.add_argument("--height", type=_side, help="film height to convert at")
+    _add_define_option(cv)
     cv.add_argument("--quiet", action="store_true", help="no summary line")
     cv.set_defaults(run=cmd_convert)
 
@@ -418,7 +420,28 @@ def _names_of(choices: tuple[str, ...]):
     return parse
 
 
+_PARAMETER = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)=(.*)", re.S)
+
+
+def _define(text: str) -> tuple[str, str]:
+    """``NAME=VALUE`` of ``-D``: a Mitsuba scene parameter."""
+    found = _PARAMETER.fullmatch(text)
+    if found is None or "\n" in text:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE (a scene's $NAME), got {text[:60]!r}")
+    return found.group(1), found.group(2)
+
+
+def _add_define_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-D", "--define", type=_define, action="append", default=[], metavar="NAME=VALUE",
+                   help="set a Mitsuba scene's $NAME, as Mitsuba's -D does (over its <default>; repeatable)")
+
+
+def _parameters(args: argparse.Namespace) -> dict[str, str]:
+    return dict(getattr(args, "define", []) or [])
+
+
 def _add_render_options(p: argparse.ArgumentParser) -> None:
+    _add_define_option(p)
     p.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
     p.add_argument("--threads", type=_threads, default=os.cpu_count() or 1,
                    help="worker threads (default: all cores); the image does not depend on it")
@@ -672,7 +695,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .render_loop import RenderSettings, render
 
     scene_path = scene_mod.resolve_scene(args.scene) if args.scene else scene_mod.default_scene_path()
-    scene = scene_mod.load_scene(scene_path, args.width, args.height)
+    scene = scene_mod.load_scene(scene_path, args.width, args.height, parameters=_parameters(args))
     defaults = scene.render_defaults
     strategy = _strategy_from(args, args.strategy or defaults.get("strategy", "mis"),
                               args.light_sampling or defaults.get("light_sampling"))
@@ -724,7 +747,7 @@ def cmd_reference(args: argparse.Namespace) -> int:
     for name, value in defaults.items():
         if getattr(args, name) is None:
             setattr(args, name, value)
-    scene = scene_mod.load_scene(scene_path, width, height)
+    scene = scene_mod.load_scene(scene_path, width, height, parameters=_parameters(args))
     strategy = _strategy_from(args, "mis", args.light_sampling or scene.render_defaults.get("light_sampling"))
     _warn_if_dark(scene)
     if film is not None:
@@ -824,7 +847,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
         same = False
     if same:
         raise InputError("the output would replace the scene it is converted from", str(output))
-    scene = scene_mod.load_scene(scene_path, width=args.width, height=args.height)
+    scene = scene_mod.load_scene(scene_path, width=args.width, height=args.height,
+                                 parameters=_parameters(args))
     # The files are written together: a signal while they are is held until all are.
     with interrupts.deferred() as arrived:
         written = write_scene(scene, output, args.scene)

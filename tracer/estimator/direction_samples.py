@@ -9,7 +9,8 @@ ray hits the front of an emitter of radiance Le at distance r, it adds
 
 with p_l the pdf with which the light technique would have produced the same direction, the
 selection probability included (``tracer.lights.pdf``); a delta lobe's sample, or one without
-light samples, has w_d = 1.
+light samples, has w_d = 1. A ray that escapes the scene meets the environment, if there is one
+(``environment_value``), weighted the same way against the environment's light pdf.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from ..frame import dot, sub, to_world
 from ..geometry import surface_point
 from ..jit import jit
 from ..kernels import UNBOUND, template
+from ..lights import environment as environment_light
 from ..samplers import dimensions
 
 
@@ -79,9 +81,36 @@ def direction_value(hit_table, first_sphere: int, light_tables, heuristic: int, 
         receiver = (shadings[row, 0], shadings[row, 1], shadings[row, 2])
         pdf_light = lights.pdf(light_tables, x, n, receiver, p, wi, dist)
         w = dispatch.weight(heuristic, pdfs[row], other * pdf_light)
-    raw = (values[row, 0] * hit_table[p, 12], values[row, 1] * hit_table[p, 13],
-           values[row, 2] * hit_table[p, 14])
-    return True, dist, (raw[0] * w, raw[1] * w, raw[2] * w), raw, pdf_light
+    value, raw = _carried(values, row, (hit_table[p, 12], hit_table[p, 13], hit_table[p, 14]), w)
+    return True, dist, value, raw, pdf_light
+
+
+@jit
+def _carried(values, row: int, le, w: float):
+    """``(value, raw)`` of direction row ``row`` meeting radiance ``le``: raw = its weight x le,
+    value = raw x the MIS weight ``w``."""
+    raw = (values[row, 0] * le[0], values[row, 1] * le[1], values[row, 2] * le[2])
+    return (raw[0] * w, raw[1] * w, raw[2] * w), raw
+
+
+@template
+def environment_value(light_tables, heuristic: int, rays, row: int):
+    """What direction sample ``row``, whose ray escapes the scene, adds from the environment:
+    ``(value, raw, pdf_light)`` as :func:`direction_value` (the environment is never seen from
+    behind; its pdf is ``lights.pdf_environment``)."""
+    dirs, values, points, normals, shadings, origins, pdfs, deltas, others = rays
+    wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
+    le = environment_light.radiance(light_tables.environment, wi)
+    w = 1.0
+    pdf_light = 0.0
+    other = others[row]
+    if other > 0.0 and not deltas[row]:
+        x = (points[row, 0], points[row, 1], points[row, 2])
+        receiver = (shadings[row, 0], shadings[row, 1], shadings[row, 2])
+        pdf_light = lights.pdf_environment(light_tables, x, receiver, wi)
+        w = dispatch.weight(heuristic, pdfs[row], other * pdf_light)
+    value, raw = _carried(values, row, le, w)
+    return value, raw, pdf_light
 
 
 @jit

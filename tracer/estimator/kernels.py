@@ -7,7 +7,8 @@ sample and one ray per direction sample with what each would contribute; Embree 
 sets; ``gather`` adds the unblocked light samples and the direction samples that hit an
 emitter, with their MIS weights (ris resamples in between: ``combiners/ris.py``). Samples that
 can only contribute 0 cast no ray: a light sample with zero value, and a direction sample
-whose ray meets none of the emitters' bounding spheres (``lights.may_reach``). The sections of
+whose ray meets none of the emitters' bounding spheres (``lights.may_reach``) unless there is an
+environment, which every escaping ray sees. The sections of
 ``shade`` follow Mitsuba 3's ``direct.cpp``: the emitter seen directly, emitter sampling,
 BSDF (direction) sampling; the delta rule (a delta light's or lobe's sample takes weight 1,
 the other technique cannot produce it) lives in the two sampling steps.
@@ -29,14 +30,15 @@ from ..frame import add_scaled, normalized, sub
 from ..geometry import offset_origin
 from ..jit import jit
 from ..kernels import UNBOUND, kernel
+from ..lights import environment as environment_light
 from ..samplers import dimensions
 from ..textures import lookup
 from . import light_samples, shading_point
 from .combiners import ris
-from .direction_samples import direction_arrays, direction_sample, direction_value
+from .direction_samples import direction_arrays, direction_sample, direction_value, environment_value
 
 # Bound per build (``tracer.kernels.dispatch``): what the render takes and does.
-LIGHT_SAMPLES = DIRECTION_SAMPLES = LEARNS = RESAMPLES = TEXTURES = False
+LIGHT_SAMPLES = DIRECTION_SAMPLES = LEARNS = RESAMPLES = TEXTURES = ENVIRONMENT = False
 
 
 @kernel
@@ -73,6 +75,7 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
     # Read once here, not per light sample: a read through a tuple in the loop costs a
     # reference-count update (``lights.sample_with``).
     selection, technique, light_rows = light_tables.selection, light_tables.technique, light_tables.rows
+    environment = light_tables.environment
     for lane in range(len(prim)):
         radiance[lane, 0] = radiance[lane, 1] = radiance[lane, 2] = 0.0
         if RESAMPLES:
@@ -83,9 +86,12 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
             else:  # only C is read (optimal MIS applies a C)
                 lane_stats[lane, tuning.CONTROL] = 0.0
         p = prim[lane]
-        if p < 0:
-            continue
         d = (float(dirs[lane, 0]), float(dirs[lane, 1]), float(dirs[lane, 2]))
+        if p < 0:
+            if ENVIRONMENT:  # the environment seen directly, as emitters are (weight 1)
+                le = environment_light.radiance(environment, d)
+                radiance[lane, 0], radiance[lane, 1], radiance[lane, 2] = le[0], le[1], le[2]
+            continue
         o = (float(origins[lane, 0]), float(origins[lane, 1]), float(origins[lane, 2]))
         reflects, cos_view, x, geometric, normal, s, t, wo, material, kind = shading_point.at_hit(
             hit_table, first_sphere, kinds, behind, corner_normals, p, o, d)
@@ -115,8 +121,8 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
         if LIGHT_SAMPLES:
             for j in range(lights_here):
                 wi_world, dist, value, raw, w_balance, share_t = light_samples.light_sample(
-                    j, sampler, state, selection, technique, light_rows, here, plan, point, surface,
-                    (own_light, own_dir))
+                    j, sampler, state, selection, technique, light_rows, environment, here, plan, point,
+                    surface, (own_light, own_dir))
                 # A sample that cannot contribute casts no ray. Learning looks at the unweighted
                 # value: whether a sample carries light must not depend on the heuristic (max's
                 # weight 0 would hide it from the allocation's statistics).
@@ -124,14 +130,12 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
                 if not (carries[0] > 0.0 or carries[1] > 0.0 or carries[2] > 0.0):
                     _flag_nan(radiance, lane, value)
                     continue
-                # The shadow ray runs from the offset origin to the sampled point, stopping short of it.
-                origin = offset_origin(x, eps, geometric, wi_world)
-                to_target, length = normalized(sub(add_scaled(x, dist, wi_world), origin))
+                origin, to_target, tmax = _shadow_ray(x, eps, geometric, wi_world, dist)
                 if RESAMPLES:
                     ris.offer(shadow_origin, shadow_dir, shadow_tmax, shadow_value, weight_sum, u_left,
-                              radiance, lane, origin, to_target, max(length - eps, 0.0), value)
+                              radiance, lane, origin, to_target, tmax, value)
                     continue
-                shadow_tmax[n_shadow] = max(length - eps, 0.0)
+                shadow_tmax[n_shadow] = tmax
                 if learning:
                     # Unblocked, this sample adds (1 - w_bal) / n̄_l to C (``tracer.tuning``).
                     shadow_other[n_shadow] = own_light
@@ -153,8 +157,8 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
                     _flag_nan(radiance, lane, value)
                     continue
                 origin = offset_origin(x, eps, geometric, wi_world)
-                if not lights.may_reach(spheres, origin, wi_world):
-                    continue  # it could only contribute 0: no ray
+                if not ENVIRONMENT and not lights.may_reach(spheres, origin, wi_world):
+                    continue  # it could only contribute 0: no ray (with an environment, any may)
                 dir_pdf[n_direction] = own_dir * pdf_dir
                 dir_delta[n_direction] = delta
                 dir_other[n_direction] = own_light
@@ -194,11 +198,14 @@ def gather(radiance, surfaces, light_tables, plan, tuned, shadow, blocked, direc
     lanes, others, pdfs, deltas = direction.lane, direction.other, direction.pdf, direction.delta
     for row in range(len(prim)):
         if prim[row] < 0:
-            continue
-        hit, _, value, raw, pdf_light = direction_value(hit_table, first_sphere, light_tables, plan.heuristic,
-                                                        rays, row, prim[row])
-        if not hit:
-            continue
+            if not ENVIRONMENT:
+                continue
+            value, raw, pdf_light = environment_value(light_tables, plan.heuristic, rays, row)
+        else:
+            hit, _, value, raw, pdf_light = direction_value(hit_table, first_sphere, light_tables,
+                                                            plan.heuristic, rays, row, prim[row])
+            if not hit:
+                continue
         lane = lanes[row]
         for c in range(3):
             radiance[lane, c] += value[c]
@@ -212,6 +219,18 @@ def gather(radiance, surfaces, light_tables, plan, tuned, shadow, blocked, direc
                 share_t = mis.weight_of(mis.BALANCE, pdf_light, pdfs[row] / (plan.total - other))
             tuning.learn(lane_stats, lane, shares, collect, -(1.0 - w_balance) / other,
                          tuning.mean_square(raw, w_balance), share_t, other / plan.total)
+
+
+@jit
+def _shadow_ray(x, eps: float, geometric, wi, dist: float):
+    """``(origin, direction, tmax)`` of the shadow ray of a light sample at distance ``dist``
+    along ``wi`` from ``x``: from the offset origin to the sampled point, stopping short of it;
+    to infinity for the environment (dist inf)."""
+    origin = offset_origin(x, eps, geometric, wi)
+    if dist == math.inf:
+        return origin, wi, math.inf
+    to_target, length = normalized(sub(add_scaled(x, dist, wi), origin))
+    return origin, to_target, max(length - eps, 0.0)
 
 
 @jit

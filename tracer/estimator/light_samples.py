@@ -23,24 +23,25 @@ LEARNS = DIRECTION_SAMPLES = False  # bound per build (``tracer.kernels``)
 
 
 @template
-def light_sample(j: int, sampler, state, selection, technique, rows, params, plan, point, surface, own):
+def light_sample(j: int, sampler, state, selection, technique, rows, environment, params, plan, point,
+                 surface, own):
     """Light sample ``j`` of the shading point ``point = (x, geometric, normal, s, t, wo)`` of
     material ``surface = (kind, row)``, taken with expected counts ``own = (n̄_l, n̄_d)``, from
-    the light tables' ``selection``, ``technique`` and ``rows``, read before the kernel's loop
-    and passed apart (``lights.sample_with``; 11 parameters for that reason):
+    the light tables' ``selection``, ``technique``, ``rows`` and ``environment``, read before
+    the kernel's loop and passed apart (``lights.sample_with``; 12 parameters for that reason):
     ``(wi_world, dist, value, raw, w_balance, share_t)``.
 
     value : RGB it adds if unblocked (weighted).   raw : the same before the MIS weight (what
     the learning looks at).   w_balance, share_t : its balance weight and p_l / (p_l + p_d), for
-    the learning (``tracer.tuning``; 1 unless the build learns).   dist : to the light point;
-    0 with a zero value where the sample is invalid."""
+    the learning (``tracer.tuning``; 1 unless the build learns).   dist : to the light point
+    (inf for the environment); 0 with a zero value where the sample is invalid."""
     x, geometric, normal, s, t, wo = point
     kind, material = surface
     own_light, own_dir = own
     zero = (0.0, 0.0, 0.0)
     u = dispatch.uniform_pair(sampler, state, dimensions.light_point(j))
     wi_world, dist, le, pdf_light, delta = lights.sample_with(
-        selection, technique, rows, x, geometric, normal,
+        selection, technique, rows, environment, x, geometric, normal,
         dispatch.uniform(sampler, state, dimensions.light_choice(j)),
         u[0], u[1])
     if not pdf_light > 0.0:

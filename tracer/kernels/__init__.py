@@ -39,6 +39,8 @@ class FeatureSet:
     light_samples, direction_samples : the strategy takes samples of that technique.
     learns : the estimator learns between passes (``tracer.tuning``).
     textures : some material parameter of the scene is textured (``tracer.textures``).
+    environment : the scene has an environment light (``tracer.lights.environment``): rays
+        that escape see it, and it may be light-sampled.
     shared : a build that renders of many scenes share (``widened``): every material and
         technique, each called rather than inlined, so that all such builds link one compiled
         copy of each instead of compiling them into every kernel.
@@ -55,6 +57,7 @@ class FeatureSet:
     learns: bool
     shared: bool = False
     textures: bool = False
+    environment: bool = False
 
     @property
     def key(self) -> str:
@@ -79,7 +82,7 @@ class FeatureSet:
         return {"LIGHT_SAMPLES": self.light_samples, "DIRECTION_SAMPLES": self.direction_samples,
                 "LEARNS": self.learns, "RESAMPLES": plugins.get("combiner", self.combiner).resamples,
                 "PER_POINT_SELECTION": bool(getattr(selection, "per_point", False)),
-                "TEXTURES": self.textures}
+                "TEXTURES": self.textures, "ENVIRONMENT": self.environment}
 
     def without(self, fields: tuple[str, ...]) -> "FeatureSet":
         """This feature set with ``fields`` at fixed defaults (no materials or techniques, the
@@ -89,7 +92,8 @@ class FeatureSet:
 
         defaults = {"materials": (), "light_techniques": (), "light_selection": "power",
                     "sampler": "independent", "direction": None, "combiner": "sum", "light_samples": False,
-                    "direction_samples": False, "learns": False, "textures": False}
+                    "direction_samples": False, "learns": False, "textures": False,
+                    "environment": False}
         unknown = set(fields) - set(defaults)
         if unknown:
             raise ValueError(f"no feature-set field {sorted(unknown)[0]!r} to ignore")
@@ -97,9 +101,10 @@ class FeatureSet:
 
     def widened(self) -> "FeatureSet":
         """This feature set with every registered material and light technique, ``shared``: the
-        build that renders of many scenes share (``shared_builds``). Textures stay as the scene
-        needs them: a textured scene's build is a second shared build, so that the many scenes
-        without textures keep compiling (and running) kernels without the lookups."""
+        build that renders of many scenes share (``shared_builds``). Textures and the
+        environment stay as the scene needs them: such a scene's build is another shared build,
+        so that the many scenes without them keep compiling (and running) kernels without the
+        lookups."""
         from dataclasses import replace
 
         return replace(self, materials=plugins.names("material"),
@@ -107,7 +112,8 @@ class FeatureSet:
 
     def describe(self) -> str:
         """One line of what is compiled: ``diffuse, roughconductor; triangle_area; power; ...``."""
-        parts = [", ".join(self.materials) or "no materials", ", ".join(self.light_techniques) or "no lights",
+        lights = self.light_techniques + (("environment",) if self.environment else ())
+        parts = [", ".join(self.materials) or "no materials", ", ".join(lights) or "no lights",
                  f"{self.light_selection} selection", f"{self.sampler} sampler",
                  f"{self.combiner}" + (f" with {self.direction} directions" if self.direction else "")]
         if self.learns:

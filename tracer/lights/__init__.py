@@ -19,7 +19,11 @@ the render's selection and a generated chain over its techniques):
   angle; for a delta light, the selection probability alone);
 - :func:`pdf` ``(lights, x, n, n_receiver, prim, wi, dist)``: the pdf with which :func:`sample`
   would produce the direction ``wi`` from ``x`` that hits the emitting primitive ``prim`` at
-  distance ``dist``.
+  distance ``dist``; :func:`pdf_environment` that of a direction that escapes the scene.
+
+The environment (``tracer.lights.environment``) is the last candidate when the scene has one;
+it has no technique plug-in (code -1): ``sample_with`` samples it by its own table, and its
+samples have ``dist`` = inf (shadow rays to infinity).
 
 ``n`` is the geometric normal toward the viewer (the techniques' cosine warp uses it);
 ``n_receiver`` the shading normal, above which the materials reflect, so that the BVH's
@@ -31,6 +35,7 @@ selection may skip lights below it (0: no such bound).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -39,10 +44,12 @@ import numpy as np
 from .. import plugins
 from ..kernels import UNBOUND, kernel, template
 from . import emitters
+from . import environment as environment_light
 from .bounds import emitter_spheres, may_reach
 
 # The widest row any technique writes: one 64-byte cache line of float32.
 ROW_WIDTH = plugins.LIGHT_ROW_WIDTH
+ENVIRONMENT = False  # bound per build (``tracer.kernels``): the scene has an environment
 
 
 def light_samplings() -> tuple[str, ...]:
@@ -75,6 +82,8 @@ class LightTables(NamedTuple):
         hits it; both triangles of a quad sampled as a rectangle map to its one candidate.
     spheres : (B, 4) float64 bounding spheres (center, radius) of the emitters
         (``bounds.may_reach``).
+    environment : the environment's table (``environment.EnvironmentTable``; its
+        ``candidate`` -1 without one).
     """
 
     selection: Any
@@ -82,6 +91,7 @@ class LightTables(NamedTuple):
     rows: np.ndarray
     candidate_of_prim: np.ndarray
     spheres: np.ndarray
+    environment: Any
 
 
 @template
@@ -96,11 +106,13 @@ def sample(lights, x, n, n_receiver, u_select: float, u0: float, u1: float):
         selection probability alone. 0 where invalid.
     delta : a delta light (no other technique can produce this sample).
     """
-    return sample_with(lights.selection, lights.technique, lights.rows, x, n, n_receiver, u_select, u0, u1)
+    return sample_with(lights.selection, lights.technique, lights.rows, lights.environment, x, n, n_receiver,
+                       u_select, u0, u1)
 
 
 @template
-def sample_with(selection, technique, rows, x, n, n_receiver, u_select: float, u0: float, u1: float):
+def sample_with(selection, technique, rows, environment, x, n, n_receiver, u_select: float, u0: float,
+                u1: float):
     """:func:`sample` with the tables' parts read beforehand: a per-lane loop reads them once,
     before it starts. Each read of an array through a tuple costs a reference-count update
     (numba), and reading ``lights.selection``, ``.technique`` and ``.rows`` per light sample cost
@@ -108,6 +120,9 @@ def sample_with(selection, technique, rows, x, n, n_receiver, u_select: float, u
     k, pmf_k = dispatch.choose(selection, x, n_receiver, u_select)
     if k < 0:
         return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, False
+    if ENVIRONMENT and k == environment.candidate:
+        wi, le, p = environment_light.sample(environment, u0, u1)
+        return wi, math.inf, le, pmf_k * p, False
     wi, dist, le, p, delta = dispatch.technique_sample(technique[k], rows, k, x, n, u0, u1)
     return wi, dist, le, pmf_k * p, delta
 
@@ -121,6 +136,19 @@ def pdf(lights, x, n, n_receiver, prim: int, wi, dist: float) -> float:
     if k < 0:
         return 0.0
     p = dispatch.technique_pdf(lights.technique[k], lights.rows, k, x, n, wi, dist)
+    if not p > 0.0:
+        return 0.0
+    return dispatch.selection_pmf(lights.selection, k, x, n_receiver) * p
+
+
+@template
+def pdf_environment(lights, x, n_receiver, wi) -> float:
+    """Solid-angle pdf with which :func:`sample` picks the direction ``wi`` (world) from ``x``
+    when the ray along it escapes to the environment; 0 without a sampled environment."""
+    k = lights.environment.candidate
+    if k < 0:
+        return 0.0
+    p = environment_light.pdf(lights.environment, wi)
     if not p > 0.0:
         return 0.0
     return dispatch.selection_pmf(lights.selection, k, x, n_receiver) * p
@@ -157,15 +185,22 @@ def build_tables(scene, light_selection: str = "power",
     in_rectangle = (np.isin(tri, np.concatenate(rectangles.prims)) if len(rectangles)
                     else np.zeros(len(tri), bool))
     records = {"triangle": emitters.triangles(scene, tri[~in_rectangle]), "rectangle": rectangles,
-               "sphere": emitters.spheres(scene), "point": emitters.points(scene)}
+               "sphere": emitters.spheres(scene), "point": emitters.points(scene),
+               "directional": emitters.directionals(scene), "environment": emitters.environment(scene)}
     ordered = [records[kind] for kind in emitters.KINDS]
     count = sum(len(r) for r in ordered)
     rows = np.zeros((count, ROW_WIDTH), dtype=np.float32)
     technique = np.zeros(count, dtype=np.int8)
     candidate_of_prim = np.full(len(scene.faces) + len(scene.spheres), -1, dtype=np.int32)
     first = 0
+    environment_candidate = -1
     for kind, record in zip(emitters.KINDS, ordered, strict=True):
         if not len(record):
+            continue
+        if kind == "environment":  # sampled by its own table: no technique, no primitives
+            technique[first] = -1
+            environment_candidate = first
+            first += 1
             continue
         plugin = chosen.get(kind)
         if plugin is None:
@@ -184,14 +219,16 @@ def build_tables(scene, light_selection: str = "power",
     # two triangles bound it exactly).
     spheres = emitter_spheres(scene.vertices[scene.faces[tri]], scene.shape_of_triangle[tri],
                               scene.ray_epsilon, records["sphere"].spheres, records["sphere"].owner)
-    return LightTables(tables, technique, np.ascontiguousarray(rows), candidate_of_prim, spheres), \
-        candidates.owner
+    environment = environment_light.table(getattr(scene, "environment", None), environment_candidate)
+    return LightTables(tables, technique, np.ascontiguousarray(rows), candidate_of_prim, spheres,
+                       environment), candidates.owner
 
 
 def technique_names(tables: LightTables) -> tuple[str, ...]:
-    """The names of the techniques the candidates of ``tables`` use, by code."""
+    """The names of the techniques the candidates of ``tables`` use, by code (the environment,
+    code -1, has none)."""
     by_code = plugins.by_code("light_technique")
-    return tuple(by_code[c].name for c in sorted(set(tables.technique.tolist())))
+    return tuple(by_code[c].name for c in sorted(set(tables.technique.tolist())) if c >= 0)
 
 
 @dataclass
@@ -235,7 +272,7 @@ class LightSampler:
         from ..kernels import FeatureSet, build
 
         features = FeatureSet((), technique_names(self.tables), self.selection, "independent", None, "sum",
-                              True, False, False)
+                              True, False, False, environment=self.tables.environment.candidate >= 0)
         return build(features).function(t)
 
     def sample(self, u_select: np.ndarray, u_point: np.ndarray, x: np.ndarray,
@@ -317,4 +354,4 @@ def _selection_pmf_lanes(tables, k, x, receiver):
 dispatch = UNBOUND  # bound per build (``tracer.kernels``)
 
 __all__ = ["LIGHT_SAMPLINGS", "ROW_WIDTH", "SELECTIONS", "LightSample", "LightSampler", "LightTables",
-           "build_tables", "may_reach", "pdf", "sample", "technique_names"]
+           "build_tables", "may_reach", "pdf", "pdf_environment", "sample", "technique_names"]

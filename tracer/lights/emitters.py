@@ -1,6 +1,6 @@
 """A scene's emitters by kind: what light techniques sample and light selections choose among.
 
-Four kinds (``KINDS``), each a record of arrays with one row per emitter candidate:
+Six kinds (``KINDS``), each a record of arrays with one row per emitter candidate:
 
 =========  ===========================================================  =========================
 kind       candidates                                                   record
@@ -10,13 +10,19 @@ triangle   every emitting triangle of positive area (a quad's two       :class:`
 rectangle  emitting quads with perpendicular edges, when the render's    :class:`RectangleEmitters`
            light sampling has a technique for rectangles
 sphere     emitting analytic spheres                                    :class:`SphereEmitters`
-point      point lights of positive intensity                           :class:`PointEmitters`
+point      point lights (and spot lights) of positive intensity         :class:`PointEmitters`
+direc-     directional lights of positive irradiance (delta lights at   :class:`DirectionalEmitters`
+tional     infinity)
+environ-   the scene's environment if it sends light: one candidate,    :class:`Emitters`
+ment       sampled by ``tracer.lights.environment`` (no technique)
 =========  ===========================================================  =========================
 
 Every record also says each candidate's flux (for the ``power`` selection), the shape it
-belongs to (``owner``: shape index, -1 - i for point light i; for the ``uniform`` selection),
-its area (1 for a point light), its bounds (for the light BVH) and the scene primitives it
-covers (for the pdf of a direction that hits it).
+belongs to (``owner``: shape index, -1 - i for point light i, -1 - P - j for directional light
+j, -1 - P - D for the environment; for the ``uniform`` selection), its area (1 for the lights
+without one), its bounds
+(for the light BVH) and the scene primitives it covers (for the pdf of a direction that hits
+it).
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KINDS = ("triangle", "rectangle", "sphere", "point")
+KINDS = ("triangle", "rectangle", "sphere", "point", "directional", "environment")
 # Smallest emitting triangle the light table takes: 1 / area must be finite in float32.
 MIN_LIGHT_AREA = float(np.finfo(np.float32).tiny)
 # A quad is sampled as a rectangle when its edges are perpendicular to this relative precision
@@ -85,10 +91,22 @@ class SphereEmitters(Emitters):
 
 @dataclass
 class PointEmitters(Emitters):
-    """position (P, 3); intensity (P, 3) in W/sr."""
+    """position (P, 3); intensity (P, 3) in W/sr; spot_axis (P, 3), cutoff, beam (P,) radians
+    (pi, pi: every way; ``Scene.point_cutoff``)."""
 
     position: np.ndarray = None  # type: ignore[assignment]
     intensity: np.ndarray = None  # type: ignore[assignment]
+    spot_axis: np.ndarray = None  # type: ignore[assignment]
+    cutoff: np.ndarray = None  # type: ignore[assignment]
+    beam: np.ndarray = None  # type: ignore[assignment]
+
+
+@dataclass
+class DirectionalEmitters(Emitters):
+    """direction (D, 3) the light travels in; irradiance (D, 3) W/m^2."""
+
+    direction: np.ndarray = None  # type: ignore[assignment]
+    irradiance: np.ndarray = None  # type: ignore[assignment]
 
 
 def emitting_triangles(scene) -> np.ndarray:
@@ -155,14 +173,78 @@ def spheres(scene) -> SphereEmitters:
                           spheres=scene.spheres[sph], emission=scene.sphere_emission[sph])
 
 
+def spot_solid_angle(cutoff: float, beam: float, nodes: int = 4096) -> float:
+    """The integral of a spot's falloff over the sphere, angles in radians (4 pi for a light that
+    shines every way, cutoff pi):
+    2 pi times the integral over theta of falloff(theta) sin(theta), the falloff 1 within the beam
+    width and linear in theta to 0 at the cutoff (Mitsuba's ``spot``); exact to 1e-7 by the
+    midpoint rule on the ramp."""
+    if cutoff >= np.pi:
+        return 4.0 * np.pi
+    beam = min(beam, cutoff)
+    inner = 2.0 * np.pi * (1.0 - np.cos(beam))
+    if cutoff <= beam:
+        return inner
+    theta = beam + (np.arange(nodes) + 0.5) * (cutoff - beam) / nodes
+    ramp = (cutoff - theta) / (cutoff - beam)
+    return float(inner + 2.0 * np.pi * np.sum(ramp * np.sin(theta)) * (cutoff - beam) / nodes)
+
+
 def points(scene) -> PointEmitters:
-    flux = 4.0 * np.pi * scene.point_intensity.mean(axis=1)
+    cones = np.array([spot_solid_angle(np.radians(c), np.radians(b))
+                      for c, b in zip(scene.point_cutoff, scene.point_beam, strict=True)]).reshape(-1)
+    flux = cones * scene.point_intensity.mean(axis=1)
     lit = np.flatnonzero(flux > 0.0)
     position = scene.point_position[lit]
     axis = np.zeros((len(lit), 3))
     axis[:, 2] = 1.0
     return PointEmitters(flux[lit], (-1 - lit).astype(np.int64), np.ones(len(lit)), position, position, axis,
-                         -np.ones(len(lit)), [], position=position, intensity=scene.point_intensity[lit])
+                         -np.ones(len(lit)), [], position=position, intensity=scene.point_intensity[lit],
+                         spot_axis=scene.point_axis[lit], cutoff=np.radians(scene.point_cutoff[lit]),
+                         beam=np.radians(scene.point_beam[lit]))
+
+
+def directionals(scene) -> DirectionalEmitters:
+    """Directional lights: flux pi r^2 mean(E) over the scene's bounding sphere (what a disk of
+    the scene's size catches), bounds the scene's box, emitting every way."""
+    irradiance = getattr(scene, "directional_irradiance", np.zeros((0, 3)))
+    lit = np.flatnonzero(irradiance.max(axis=1, initial=0.0) > 0.0)
+    lo, hi = scene_box(scene)
+    radius = 0.5 * float(np.linalg.norm(hi - lo))
+    radius = radius if radius > 0.0 else 1.0
+    axis = np.tile([0.0, 0.0, 1.0], (len(lit), 1))
+    return DirectionalEmitters(np.pi * radius * radius * irradiance[lit].mean(axis=1),
+                               (-1 - len(scene.point_position) - lit).astype(np.int64), np.ones(len(lit)),
+                               np.tile(lo, (len(lit), 1)), np.tile(hi, (len(lit), 1)), axis,
+                               -np.ones(len(lit)), [], direction=scene.directional_direction[lit],
+                               irradiance=irradiance[lit])
+
+
+def environment(scene) -> Emitters:
+    """The scene's environment as one candidate (none without one, or if it is black). Its
+    flux is ``tracer.lights.environment.flux`` over the scene's bounding sphere; its bounds, for
+    the light BVH, are the scene's box, emitting every way."""
+    from . import environment as light
+
+    env = getattr(scene, "environment", None)
+    lo, hi = scene_box(scene)
+    radius = 0.5 * float(np.linalg.norm(hi - lo))
+    power = light.flux(env, radius if radius > 0.0 else 1.0) if env is not None else 0.0
+    lit = 1 if power > 0.0 else 0
+    axis = np.tile([0.0, 0.0, 1.0], (lit, 1))
+    owner = -1 - len(scene.point_position) - len(getattr(scene, "directional_irradiance", ()))
+    return Emitters(np.full(lit, power), np.full(lit, owner, dtype=np.int64),
+                    np.ones(lit), np.tile(lo, (lit, 1)), np.tile(hi, (lit, 1)), axis, -np.ones(lit), [])
+
+
+def scene_box(scene) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)`` (3,) the box around the scene's triangles, spheres and point lights (zeros
+    for an empty scene)."""
+    centre, radius = scene.spheres[:, :3], scene.spheres[:, 3:]
+    points = np.concatenate([scene.vertices, scene.point_position, centre - radius, centre + radius])
+    if not len(points):
+        return np.zeros(3), np.zeros(3)
+    return points.min(axis=0), points.max(axis=0)
 
 
 @dataclass

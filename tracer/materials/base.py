@@ -103,6 +103,10 @@ class MaterialType(Plugin):
         ``behind(values) -> values``, its parameters as seen from behind the shading normal. The
         estimator shades a hit from behind with a row of those (``MaterialTable.shading``), so
         that the type itself always sees ``wo.z > 0``.
+    transmits : the type has a transmission lobe with a density (``roughdielectric``): its
+        ``eval_pdf`` may be nonzero for wi.z < 0, light sampling takes |cos theta_i| and no
+        light selection may skip the lights below its shading normal's horizon. (A delta
+        transmission needs none of this: light samples never see it.)
     """
 
     params: tuple[Param, ...] = ()
@@ -110,6 +114,7 @@ class MaterialType(Plugin):
     derived: tuple[Param, ...] = ()
     derive: Callable[[dict[str, object]], dict[str, object]] | None = None
     behind: Callable[[dict[str, object]], dict[str, object]] | None = None
+    transmits: bool = False
     dims: int = 3
     kind: str = "material"
 

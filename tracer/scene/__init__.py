@@ -33,7 +33,8 @@ def default_scene_path() -> Path:
 
 def load_scene(source: str | os.PathLike[str] | dict[str, Any], width: int | None = None,
                height: int | None = None, base_dir: str | os.PathLike[str] | None = None,
-               notify: Callable[[str], None] | None = None) -> Scene:
+               notify: Callable[[str], None] | None = None,
+               parameters: dict[str, str] | None = None) -> Scene:
     """Read and validate a scene.
 
     source : a scene file path (``.xml``: a Mitsuba 3 scene, anything else TOML), the name of
@@ -46,9 +47,14 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any], width: int | Non
     notify : receives, as one line, what the scene asks for and tracer does not do (a
         Mitsuba scene's integrator, filter, ...); default: ``tracer.notices.note``, which
         drops it unless a handler was installed (the command line installs one).
+    parameters : a Mitsuba scene's ``$name`` values by name, as Mitsuba's ``-D name=value``
+        gives them (over the file's ``<default>``s); refused for a TOML scene, which has none.
     Raises ``InputError`` naming the file (``<dict>`` for a dict) and the key (for XML: the
         line and element) at fault.
     """
+    if parameters and isinstance(source, dict):
+        raise InputError("scene parameters (-D) are for Mitsuba XML scenes; a TOML scene has no $names",
+                         "<dict>")
     if isinstance(source, dict):
         base = Path(base_dir) if base_dir is not None else Path.cwd()
         return scene_from_document(source, "<dict>", base, width, height)
@@ -56,10 +62,12 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any], width: int | Non
         raise InputError(f"a scene is a file path or a dict, not {type(source).__name__}")
     path = str(resolve_scene(source))
     base = Path(base_dir) if base_dir is not None else Path(path).parent
+    if parameters and Path(path).suffix.lower() != ".xml":
+        raise InputError("scene parameters (-D) are for Mitsuba XML scenes; a TOML scene has no $names", path)
     if Path(path).suffix.lower() == ".xml":
         from .mitsuba_xml import read_mitsuba_scene
 
-        return read_mitsuba_scene(path, width, height, base, notify or notices.note)
+        return read_mitsuba_scene(path, width, height, base, notify or notices.note, parameters)
     return scene_from_document(read_toml_file(path), path, base, width, height)
 
 

@@ -48,7 +48,8 @@ TOP = Section("top level", "The tables of a scene file.", (
     Key("camera", "table", REQUIRED, "the pinhole camera"),
     Key("materials", "table of tables", "none", "`[materials.NAME]`, one table per material"),
     Key("shapes", "array of tables", "none", "`[[shapes]]`: geometry, optionally emitting"),
-    Key("lights", "array of tables", "none", "`[[lights]]`: point lights"),
+    Key("lights", "array of tables", "none", "`[[lights]]`: point, spot and directional lights"),
+    Key("environment", "table", "none", "`[environment]`: light from every direction at infinity"),
 ))
 
 RENDER = Section("[render]", "Defaults of `tracer render`; its flags win. `reference`, `compare` and "
@@ -136,8 +137,42 @@ POINT_LIGHT = Section("[[lights]] type = \"point\"", "A point light: a delta lig
     Key("intensity", VEC3 + " >= 0, <= 1e18", REQUIRED, "radiant intensity, W/sr per channel"),
 ))
 
+SPOT_LIGHT = Section("[[lights]] type = \"spot\"", "A spot light (Mitsuba's `spot`): a point light shining "
+                     "within a cone, full within the beam width and falling linearly in angle to 0 at the "
+                     "cutoff.", (
+    Key("type", "string", REQUIRED, "spot"),
+    Key("position", VEC3, REQUIRED, "world position"),
+    Key("intensity", VEC3 + " >= 0, <= 1e18", REQUIRED, "radiant intensity on the axis, W/sr per channel"),
+    Key("direction", VEC3, REQUIRED, "the axis the light shines along (not zero)"),
+    Key("cutoff_angle", "degrees in (0, 180]", "20", "where the light ends"),
+    Key("beam_width", "degrees in [0, 180]", "3/4 of cutoff_angle", "where the falloff starts"),
+))
+
+DIRECTIONAL_LIGHT = Section("[[lights]] type = \"directional\"", "A directional light: parallel light "
+                            "arriving from infinity (the sun), seen by light sampling only.", (
+    Key("type", "string", REQUIRED, "directional"),
+    Key("direction", VEC3, REQUIRED, "the direction the light travels in (not zero)"),
+    Key("irradiance", VEC3 + " >= 0, <= 1e18", REQUIRED, "irradiance on a surface facing the light, W/m² "
+        "per channel"),
+))
+LIGHTS = {"point": POINT_LIGHT, "spot": SPOT_LIGHT, "directional": DIRECTIONAL_LIGHT}
+# A light's table before its type is read.
+LIGHT = Section("[[lights]]", "Keys of every light.", (Key("type", "string", REQUIRED, ", ".join(LIGHTS)),))
+
+ENVIRONMENT = Section("[environment]", "Light arriving from every direction at infinity: a constant "
+                      "`radiance` or a latitude-longitude `map` in Mitsuba 3's orientation (see the scene "
+                      "format's environment section); one per scene.", (
+    Key("radiance", VEC3 + " >= 0, <= 1e18", "none", "a constant environment's radiance (give this or map)"),
+    Key("map", "string", "none", "an image file (EXR, HDR, PNG, ...) relative to the scene file; 8-bit "
+        "images are sRGB-decoded"),
+    Key("scale", "number >= 0", "1", "multiplies the map's texels"),
+    Key("to_world", "3 lists of 3 numbers", "identity", "the rotation (or mirror) from the map's frame to "
+        "the world, by rows"),
+))
+
 # A shape's table before its type is read (the keys every type has).
 SHAPE = Section("[[shapes]]", "Keys of every shape.", _SHAPE_COMMON)
 SHAPES = {"quad": QUAD, "sphere": SPHERE, "mesh": MESH}
 # Every section, in the order the reference lists them.
-SECTIONS = (TOP, RENDER, CAMERA, MATERIAL, TEXTURE, QUAD, SPHERE, MESH, POINT_LIGHT)
+SECTIONS = (TOP, RENDER, CAMERA, MATERIAL, TEXTURE, QUAD, SPHERE, MESH, POINT_LIGHT, SPOT_LIGHT,
+            DIRECTIONAL_LIGHT, ENVIRONMENT)

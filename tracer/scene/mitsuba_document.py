@@ -174,13 +174,16 @@ class Document:
         return found if found is not None else self.folder / name  # missing: the reader says so
 
 
-def read_document(path: str, base: Path | None = None) -> Document:
+def read_document(path: str, base: Path | None = None, parameters: dict[str, str] | None = None) -> Document:
     """Parse the scene file ``path`` (relative file names resolve against ``base``, default its
-    folder) into a :class:`Document`. Raises InputError with the file and line at fault."""
+    folder) into a :class:`Document`; ``parameters`` define ``$name``s as Mitsuba's command-line
+    ``-D name=value`` does, before and over the file's ``<default>``s. Raises InputError with
+    the file and line at fault."""
     root = _parse_file(path, path)
     if root.tag != "scene":
         root.fail("the root element of a Mitsuba scene is <scene>")
     state = _Expansion()
+    state.defaults.update(parameters or {})
     state.versions[path] = _check_version(root)
     main = _Scope(Path(path).parent, [], [os.path.realpath(path)], Path(path).parent)
     root.children = state.expand(root, main, 1)

@@ -31,6 +31,7 @@ from ..record import MAX_SAMPLE_INDEX
 from ..textures import FILTERS, WRAPS, Texture, bind
 from ..textures.bitmap import read_texels
 from . import spectrum
+from .environment import Environment, rotation_problem
 from .mesh import MeshError, angle_weighted_normals, read_mesh_file
 from .mitsuba_document import (
     OBJECT_TAGS,
@@ -87,13 +88,15 @@ _DIELECTRIC = ("{kind} is not supported yet (tracer reads dielectric and thindie
 
 
 def read_mitsuba_scene(path: str, width: int | None = None, height: int | None = None,
-                       base: Path | None = None, notify: Callable[[str], None] | None = None) -> Scene:
+                       base: Path | None = None, notify: Callable[[str], None] | None = None,
+                       parameters: dict[str, str] | None = None) -> Scene:
     """Read the Mitsuba 3 XML scene ``path``; ``width``/``height`` override the film's size,
-    ``base`` the folder relative mesh files are looked for in (default: the scene's folder).
+    ``base`` the folder relative mesh files are looked for in (default: the scene's folder),
+    ``parameters`` define the file's ``$name``s (Mitsuba's ``-D name=value``).
     A file of Mitsuba version 0.x or 1.x is first upgraded as Mitsuba 3 upgrades it
     (:mod:`tracer.scene.mitsuba_upgrade`), and that is told in one line. What the scene asks
     for and tracer does not do is passed to ``notify`` as one line."""
-    document = read_document(path, base)
+    document = read_document(path, base, parameters)
     upgrade = upgrade_document(document)
     reader = _SceneReader(document, width, height)
     scene = reader.read()
@@ -274,6 +277,10 @@ class _SceneReader:
         self.default_row: int | None = None
         self.textures_read: dict[int, Texture] = {}  # by the id of the texture's element
         self.images: dict[tuple[str, bool], np.ndarray] = {}  # texels by (file, raw)
+        self.environment: Environment | None = None
+        self.environment_element: Element | None = None
+        self.spots: list[tuple[np.ndarray, float, float]] = []  # per point light: axis, cutoff, beam (deg)
+        self.directionals: list[tuple[np.ndarray, np.ndarray]] = []  # direction, irradiance
 
     def plugin(self, element: Element) -> _Plugin:
         return _Plugin(self.document, element, self.notes)
@@ -290,6 +297,8 @@ class _SceneReader:
             elif child.tag == "emitter":
                 if child.attrs.get("type") == "area":
                     declared_emitters.append(child)
+                elif child.attrs.get("type") in ("envmap", "constant"):  # the environment
+                    self.environment_emitter(child)
                 else:
                     self.point_emitter(child)
             elif child.tag == "bsdf":
@@ -628,16 +637,19 @@ class _SceneReader:
     # -- emitters ----------------------------------------------------------------------------
 
     def point_emitter(self, element: Element) -> None:
+        """A ``point``, ``spot`` or ``directional`` emitter (delta lights)."""
         p = self.plugin(element)
-        if p.type != "point":
-            why = {"envmap": "environment lights", "constant": "environment lights",
-                   "directional": "directional lights", "spot": "spot lights",
-                   "projector": "projector lights"}.get(p.type)
+        if p.type == "directional":
+            self.directional_emitter(p)
+            return
+        if p.type not in ("point", "spot"):
+            why = {"projector": "projector lights"}.get(p.type)
             p.fail(f"emitter '{shown(p.type)}' is not supported"
                    + (f" ({why} are not in tracer)" if why else "")
-                   + "; tracer reads point emitters and area emitters on shapes")
+                   + "; tracer reads point, spot, directional, envmap and constant emitters and area "
+                   "emitters on shapes")
         intensity = p.color("intensity", 1.0, "emitter", hi=MAX_RADIANCE)
-        position = p.point("position", None)
+        position = p.point("position", None) if p.type == "point" else None
         matrix = p.transform()
         if position is not None and matrix is not None:
             p.fail("give position or to_world, not both")
@@ -645,10 +657,82 @@ class _SceneReader:
             position = np.zeros(3) if matrix is None else matrix[:3, 3]
             if np.max(np.abs(position)) > MAX_COORDINATE:
                 p.fail(f"the position is beyond the coordinate range +-{MAX_COORDINATE:g}")
+        axis, cutoff, beam = np.array([0.0, 0.0, 1.0]), 180.0, 180.0
+        if p.type == "spot":
+            if any(obj.tag == "texture" for obj, _ in p.objects):
+                p.fail("a textured spot (an image projected by the light) is not supported")
+            cutoff_degrees = p.float("cutoff_angle", 20.0, lo=0.0, hi=180.0, lo_open=True)
+            beam_degrees = p.float("beam_width", 0.75 * cutoff_degrees, lo=0.0, hi=180.0)
+            linear = np.eye(3) if matrix is None else matrix[:3, :3]
+            problem = _similarity_problem(linear)
+            if problem is not None:
+                p.props["to_world"].fail(f"to_world of a spot light: {problem}", element)
+            axis = linear[:, 2] / np.linalg.norm(linear[:, 2])
+            cutoff, beam = cutoff_degrees, beam_degrees
         p.float("sampling_weight", 1.0, lo=0.0)
         p.done()
         self.positions.append(position)
         self.intensities.append(intensity)
+        self.spots.append((axis, cutoff, beam))
+
+    def directional_emitter(self, p: _Plugin) -> None:
+        """A ``directional`` emitter: irradiance arriving along ``direction`` (or to_world's +z)."""
+        irradiance = p.color("irradiance", 1.0, "emitter", hi=MAX_RADIANCE)
+        direction = p.point("direction", None)
+        matrix = p.transform()
+        if direction is not None and matrix is not None:
+            p.fail("give direction or to_world, not both")
+        if direction is None:
+            direction = np.array([0.0, 0.0, 1.0]) if matrix is None else matrix[:3, 2]
+        length = float(np.linalg.norm(direction))
+        if not length > 0.0 or not math.isfinite(length):
+            (p.props.get("direction") or p.props.get("to_world") or p.element).fail(
+                "the light's direction is zero", p.element)
+        p.float("sampling_weight", 1.0, lo=0.0)
+        p.done()
+        self.directionals.append((direction / length, irradiance))
+
+    def environment_emitter(self, element: Element) -> None:
+        """An ``envmap`` or ``constant`` emitter: the scene's environment (one, as in Mitsuba)."""
+        p = self.plugin(element)
+        if self.environment_element is not None:
+            p.fail(f"a second environment emitter (the first is at {self.environment_element.where}); a "
+                   "scene has one, as in Mitsuba")
+        if p.type == "constant":
+            if any(obj.tag == "texture" for obj, _ in p.objects):
+                p.fail("a textured constant emitter is not supported (give its radiance as a colour)")
+            radiance = p.color("radiance", 1.0, "emitter", hi=MAX_RADIANCE)
+            environment = Environment.constant(radiance)
+        else:
+            name = p.string("filename", None)
+            if name is None:
+                p.fail("missing property 'filename' (tracer reads an envmap from an image file)")
+            scale = p.float("scale", 1.0, lo=0.0, hi=MAX_RADIANCE)
+            path = self.document.find_file(name)
+            where = (p.props.get("filename") or element).where
+            key = (str(path), False)
+            if key not in self.images:
+                self.images[key] = read_texels(path, False, where)
+            texels = self.images[key]
+            if np.any(texels < 0.0):
+                p.props["filename"].fail(f"the environment map {path.name} has negative texels (radiance "
+                                         "is >= 0)", element)
+            if np.max(texels, initial=0.0) * scale > MAX_RADIANCE:
+                p.fail(f"the environment's radiance exceeds {MAX_RADIANCE:g} (texels x scale)")
+            matrix = p.transform()
+            linear = np.eye(3) if matrix is None else matrix[:3, :3]
+            problem = rotation_problem(linear)
+            if problem is not None:
+                p.props["to_world"].fail(f"to_world of an environment: {problem}", element)
+            if p.has("mis_compensation"):
+                if p.boolean("mis_compensation", False):
+                    self.notes.append(f"{element.where}: mis_compensation (how Mitsuba samples the map; "
+                                      "tracer samples it by its own distribution: the image is the same)")
+            environment = Environment(texels * np.float32(scale), linear, kind="envmap", source=name,
+                                      scale=scale)
+        p.float("sampling_weight", 1.0, lo=0.0)
+        p.done()
+        self.environment, self.environment_element = environment, element
 
     # -- materials ---------------------------------------------------------------------------
 
@@ -930,7 +1014,20 @@ class _SceneReader:
             table = materials.table(triples, self.sides)
         except ValueError as exc:  # the parameter ranges every reader is held to (Param.check)
             raise InputError(str(exc), self.document.path) from None
-        return g.scene(self.document.path, camera, table, self.positions, self.intensities, self.render)
+        return g.scene(self.document.path, camera, table, self.positions, self.intensities, self.render,
+                       self.environment, spots=self.spots, directionals=self.directionals)
+
+
+def _similarity_problem(linear: np.ndarray) -> str | None:
+    """Why the 3x3 ``linear`` is not a rotation times a uniform scale (to 1e-4), else None: a
+    spot's cone is its +z axis and an angle, which another transform would distort."""
+    if not np.all(np.isfinite(linear)):
+        return "numbers must be finite"
+    gram = linear.T @ linear
+    scale = float(np.trace(gram)) / 3.0
+    if not scale > 0.0 or np.max(np.abs(gram / scale - np.eye(3))) > 1e-4:
+        return "it must be a rotation and translation (a scale or shear would distort the cone)"
+    return None
 
 
 def _refuse_unsupported(root: Element) -> None:

@@ -23,6 +23,7 @@ from .. import materials
 from ..camera import Camera
 from ..materials import MaterialTable
 from ..textures import TextureTable
+from .environment import Environment
 
 # Offsets along the normal are this fraction of the scene's extent (see Scene.ray_epsilon).
 RELATIVE_RAY_OFFSET = 1e-5
@@ -56,7 +57,8 @@ class Shape:
 
 @dataclass
 class Scene:
-    """A loaded scene: triangles with per-triangle arrays, shapes, materials, point lights, camera.
+    """A loaded scene: triangles with per-triangle arrays, shapes, materials, point lights, an
+    environment, camera.
 
     vertices : (V, 3) float64 world positions, rounded to float32 (Embree's precision).
     faces : (F, 3) int32 vertex indices.
@@ -79,6 +81,13 @@ class Scene:
         textured materials; (0, 6) when nothing is textured.   sphere_frame : (S, 9) each
         analytic sphere's world-to-local rotation (rows), for its texture coordinates; (0, 9)
         when nothing is textured.
+    environment : the light arriving from infinity (``tracer.scene.environment``), or None.
+    point_axis : (P, 3) unit axis of each point light's cone (a spot light's); ``point_cutoff``,
+        ``point_beam`` (P,) its cutoff and beam-width angles in degrees, Mitsuba's ``spot``
+        (full intensity within the beam width, falling linearly in angle to 0 at the cutoff);
+        180 and 180 for a light that shines every way (the default).
+    directional_direction : (D, 3) the unit direction each directional light's light travels
+        in; ``directional_irradiance`` (D, 3) its irradiance on a surface facing it, W/m^2.
 
     Derived on construction: ``v0, edge1, edge2, normal`` (F, 3), ``area`` (F,),
     ``hit_table`` (F + S, 16), ``ray_epsilon``.
@@ -104,8 +113,28 @@ class Scene:
     textures: TextureTable = field(default_factory=TextureTable)
     corner_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
     sphere_frame: np.ndarray = field(default_factory=lambda: np.zeros((0, 9)))
+    environment: Environment | None = None
+    point_axis: np.ndarray | None = None
+    point_cutoff: np.ndarray | None = None
+    point_beam: np.ndarray | None = None
+    directional_direction: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    directional_irradiance: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def __post_init__(self) -> None:
+        count = len(self.point_position)
+        self.point_axis = (np.tile([0.0, 0.0, 1.0], (count, 1)) if self.point_axis is None
+                           else np.asarray(self.point_axis, dtype=np.float64).reshape(-1, 3))
+        self.point_cutoff = (np.full(count, 180.0) if self.point_cutoff is None
+                             else np.asarray(self.point_cutoff, dtype=np.float64).reshape(-1))
+        self.point_beam = (np.full(count, 180.0) if self.point_beam is None
+                           else np.asarray(self.point_beam, dtype=np.float64).reshape(-1))
+        if not len(self.point_axis) == len(self.point_cutoff) == len(self.point_beam) == count:
+            raise ValueError("point_axis, point_cutoff and point_beam need one row per point light")
+        self.directional_direction = np.asarray(self.directional_direction, dtype=np.float64).reshape(-1, 3)
+        self.directional_irradiance = np.asarray(self.directional_irradiance, dtype=np.float32).astype(
+            np.float64).reshape(-1, 3)
+        if len(self.directional_direction) != len(self.directional_irradiance):
+            raise ValueError("directional_direction and directional_irradiance need one row per light")
         # Vertices at float32 precision, as Embree holds them: hit points, light samples and pdfs
         # then all use the very triangles Embree intersects.
         self.vertices = np.asarray(self.vertices, dtype=np.float32).astype(np.float64)
@@ -197,13 +226,25 @@ class Scene:
             digest.update(self.textures.digest())
             add("corner_uv", self.corner_uv, "<f8")
             add("sphere_frame", self.sphere_frame, "<f8")
+        if np.any(self.point_cutoff < 180.0):  # spot lights; likewise
+            add("point_axis", self.point_axis, "<f8")
+            add("point_cone", np.stack([self.point_cutoff, self.point_beam], axis=1), "<f8")
+        if len(self.directional_direction):  # likewise
+            add("directional_direction", self.directional_direction, "<f8")
+            add("directional_irradiance", self.directional_irradiance, "<f4")
+        if self.environment is not None:  # likewise
+            add("environment_texels", self.environment.texels, "<f4")
+            add("environment_to_world", self.environment.to_world, "<f8")
         return digest.hexdigest()
 
     @property
     def has_lights(self) -> bool:
-        """Whether anything emits: a shape with emission or a point light with intensity."""
+        """Whether anything emits: a shape with emission, a point or directional light, or an
+        environment that is not black."""
         return (bool(np.any(self.emission > 0.0)) or bool(np.any(self.sphere_emission > 0.0))
-                or bool(np.any(self.point_intensity > 0.0)))
+                or bool(np.any(self.point_intensity > 0.0))
+                or bool(np.any(self.directional_irradiance > 0.0))
+                or (self.environment is not None and self.environment.emits))
 
     @property
     def triangle_count(self) -> int:

@@ -26,6 +26,7 @@ from ..record import MAX_SAMPLE_INDEX
 from ..textures import FILTERS, WRAPS, Texture, TextureTable, bind
 from ..textures.bitmap import read_texels
 from . import keys
+from .environment import Environment, rotation_problem
 from .icosphere import unit_icosphere
 from .mesh import Mesh, MeshError, angle_weighted_normals, read_mesh_file
 from .model import Scene, Shape
@@ -92,16 +93,67 @@ def scene_from_document(doc: Any, path: str, base: Path, width: int | None = Non
     lights = top.raw("lights", [])
     if not isinstance(lights, list):
         top.fail("expected an array of tables ([[lights]])", "lights")
-    point_position, point_intensity = [], []
+    point_position, point_intensity, spots, directionals = [], [], [], []
     for i, light_table in enumerate(lights):
-        light = _Reader(path, f"lights[{i}]", light_table, keys.POINT_LIGHT)
-        light.string("type", ("point",))
+        light = _Reader(path, f"lights[{i}]", light_table, keys.LIGHT)
+        kind = light.string("type", tuple(keys.LIGHTS))
+        light.expect(keys.LIGHTS[kind])
+        if kind == "directional":
+            directionals.append((_unit(light, "direction"),
+                                 light.vec3("irradiance", nonnegative=True, hi=MAX_RADIANCE)))
+            light.done()
+            continue
         point_position.append(_position(light, "position"))
         point_intensity.append(light.vec3("intensity", nonnegative=True, hi=MAX_RADIANCE))
+        spot = (np.array([0.0, 0.0, 1.0]), 180.0, 180.0)
+        if kind == "spot":
+            cutoff = float(light.number("cutoff_angle", 20.0, lo=0.0, hi=180.0, lo_open=True))
+            beam = float(light.number("beam_width", 0.75 * cutoff, lo=0.0, hi=180.0))
+            spot = (_unit(light, "direction"), cutoff, beam)
+        spots.append(spot)
         light.done()
+    environment = None
+    if top.has("environment"):
+        environment = _read_environment(
+            _Reader(path, "environment", top.raw("environment"), keys.ENVIRONMENT), base)
     top.done()
 
-    return geometry.scene(path, camera, table, point_position, point_intensity, render)
+    return geometry.scene(path, camera, table, point_position, point_intensity, render, environment,
+                          spots=spots, directionals=directionals)
+
+
+def _read_environment(r: "_Reader", base: Path) -> Environment:
+    """``[environment]``: a constant ``radiance`` or a ``map`` with ``scale`` and ``to_world``."""
+    if r.has("radiance") == r.has("map"):
+        r.fail("give radiance (a constant environment) or map (an image file), one of them")
+    if r.has("radiance"):
+        environment = Environment.constant(r.vec3("radiance", nonnegative=True, hi=MAX_RADIANCE))
+    else:
+        file = r.string("map")
+        scale = r.number("scale", 1.0, lo=0.0, hi=MAX_RADIANCE)
+        texels = read_texels(base / file, False, r.path, f"{r.key}.map")
+        if np.any(texels < 0.0):
+            r.fail(f"the map {file} has negative texels (radiance is >= 0)", "map")
+        if np.max(texels, initial=0.0) * scale > MAX_RADIANCE:
+            r.fail(f"texels x scale exceed {MAX_RADIANCE:g}", "scale")
+        to_world = _rows(r, "to_world", 3, 3, np.eye(3).tolist())
+        problem = rotation_problem(to_world)
+        if problem is not None:
+            r.fail(problem, "to_world")
+        environment = Environment(texels * np.float32(scale), to_world, kind="envmap", source=file,
+                                  scale=scale)
+    r.done()
+    return environment
+
+
+def _unit(r: "_Reader", name: str) -> np.ndarray:
+    """A direction: normalized, unless within 1e-9 of unit length already (kept as written, so
+    that a converted scene reads back to the very same bits)."""
+    v = _position(r, name)
+    length = float(np.linalg.norm(v))
+    if not length > 0.0:
+        r.fail("a direction must not be zero", name)
+    return v if abs(length - 1.0) <= 1e-9 else v / length
 
 
 def _position(r: "_Reader", name: str, default: Any = ...) -> np.ndarray:
@@ -412,8 +464,14 @@ class _Geometry:
                                  sphere=len(self.spheres) - 1))
 
     def scene(self, path: str, camera: Camera, table: materials.MaterialTable, point_position: list,
-              point_intensity: list, render: dict[str, Any]) -> Scene:
-        """The scene of these shapes with the rest a reader read: every reader ends here."""
+              point_intensity: list, render: dict[str, Any], environment: Environment | None = None,
+              spots: list | None = None, directionals: list | None = None) -> Scene:
+        """The scene of these shapes with the rest a reader read: every reader ends here.
+        ``spots``: per point light ``(axis, cutoff, beam)`` (degrees; 180, 180: every way), or
+        None for all omnidirectional; ``directionals``: ``(direction, irradiance)`` per light."""
+        omni = (np.array([0.0, 0.0, 1.0]), 180.0, 180.0)
+        spots = spots if spots is not None else [omni] * len(point_position)
+        directionals = directionals or []
         return Scene(
             path=path,
             camera=camera,
@@ -437,6 +495,12 @@ class _Geometry:
             corner_uv=(np.concatenate(self.corner_uv) if self.textures and self.corner_uv
                        else np.zeros((0, 6))),
             sphere_frame=(np.array(self.sphere_frames).reshape(-1, 9) if self.textures else np.zeros((0, 9))),
+            environment=environment,
+            point_axis=np.array([s[0] for s in spots], dtype=np.float64).reshape(-1, 3),
+            point_cutoff=np.array([s[1] for s in spots], dtype=np.float64),
+            point_beam=np.array([s[2] for s in spots], dtype=np.float64),
+            directional_direction=np.array([d[0] for d in directionals], dtype=np.float64).reshape(-1, 3),
+            directional_irradiance=_float32([d[1] for d in directionals]).reshape(-1, 3),
         )
 
     def vertices(self) -> np.ndarray:

@@ -46,6 +46,10 @@ def write_scene(scene: Scene, path: str | os.PathLike[str], source: str | None =
         names = sorted({b.param for b in scene.textures.bindings})
         raise InputError(f"the scene has textures ({', '.join(names)}), which tracer's TOML format does not "
                          "hold yet: render the XML scene itself", str(scene.path))
+    if scene.environment is not None and scene.environment.kind != "constant":
+        # Its texels would need an image file beside the TOML; until then, refused, never lost.
+        raise InputError("the scene has an environment map, which tracer convert does not write yet: render "
+                         "the XML scene itself", str(scene.path))
     target = Path(path)
     inputs = _inputs(scene)
     taken: set[Path] = set()
@@ -149,9 +153,20 @@ def scene_to_toml(scene: Scene, mesh_name, source: str | None = None) -> tuple[s
         if np.any(shape.emission):
             lines.append(f"emission = {_value(shape.emission)}")
         lines.append("")
-    for position, intensity in zip(scene.point_position, scene.point_intensity, strict=True):
-        lines += ["[[lights]]", "type = \"point\"", f"position = {_value(position)}",
-                  f"intensity = {_value(intensity)}", ""]
+    for i, (position, intensity) in enumerate(zip(scene.point_position, scene.point_intensity, strict=True)):
+        if scene.point_cutoff[i] >= 180.0:
+            lines += ["[[lights]]", "type = \"point\"", f"position = {_value(position)}",
+                      f"intensity = {_value(intensity)}", ""]
+            continue
+        lines += ["[[lights]]", "type = \"spot\"", f"position = {_value(position)}",
+                  f"intensity = {_value(intensity)}", f"direction = {_value(scene.point_axis[i])}",
+                  f"cutoff_angle = {_value(float(scene.point_cutoff[i]))}",
+                  f"beam_width = {_value(float(scene.point_beam[i]))}", ""]
+    for direction, irradiance in zip(scene.directional_direction, scene.directional_irradiance, strict=True):
+        lines += ["[[lights]]", "type = \"directional\"", f"direction = {_value(direction)}",
+                  f"irradiance = {_value(irradiance)}", ""]
+    if scene.environment is not None:  # a constant one (write_scene refuses maps)
+        lines += ["[environment]", f"radiance = {_value(scene.environment.radiance)}", ""]
     return "\n".join(lines), meshes
 
 

@@ -40,11 +40,12 @@ from ...jit import jit
 from ...kernels import kernel, template
 from ...plugins import Combiner, register
 from .. import counts as taken
-from ..direction_samples import direction_arrays, direction_value
+from ..direction_samples import direction_arrays, direction_value, environment_value
 
 NAME = "ris"
 PLUGIN = register(Combiner(NAME, module=__name__, rank=3, resamples=True,
                            doc="resampled importance sampling"))
+ENVIRONMENT = False  # bound per build (``tracer.kernels``)
 
 
 @template
@@ -93,15 +94,21 @@ def resample(radiance, surfaces, light_tables, plan, direction, prim, shadow, re
     rays = direction_arrays(direction)
     dirs, points, origins, lanes = direction.dir, direction.point, direction.origin, direction.lane
     for row in range(len(prim)):
+        wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
+        origin = (float(origins[row, 0]), float(origins[row, 1]), float(origins[row, 2]))
         if prim[row] < 0:
+            if not ENVIRONMENT:
+                continue
+            # It met no emitter: it escapes to the environment (an occlusion ray to infinity).
+            value, _, _ = environment_value(light_tables, plan.heuristic, rays, row)
+            offer(shadow_origin, shadow_dir, shadow_tmax, shadow_value, weight_sum, u_left, radiance,
+                  lanes[row], origin, wi, math.inf, value)
             continue
         hit, dist, value, _, _ = direction_value(hit_table, first_sphere, light_tables, plan.heuristic, rays,
                                                  row, prim[row])
         if not hit:
             continue
         x = (points[row, 0], points[row, 1], points[row, 2])
-        wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
-        origin = (float(origins[row, 0]), float(origins[row, 1]), float(origins[row, 2]))
         to_target, length = normalized(sub(add_scaled(x, dist, wi), origin))
         offer(shadow_origin, shadow_dir, shadow_tmax, shadow_value, weight_sum, u_left, radiance,
               lanes[row], origin, to_target, max(length - eps, 0.0), value)

@@ -1,15 +1,26 @@
-"""Point lights: a delta light of radiant intensity I (W/sr) at a position.
+"""Point lights: a delta light of radiant intensity I (W/sr) at a position, optionally a spot.
 
-The sample is the direction to the light, with le = I / d^2 (the irradiance it gives is
+The sample is the direction to the light, with le = I falloff / d^2 (the irradiance it gives is
 le |cos theta_i|) and the ``delta`` flag: no other technique can produce it, so it takes MIS
 weight 1, and its pdf is the selection probability alone.
 
-=========  =====  ==================================
-column     size   what
-=========  =====  ==================================
-POSITION   3      world position
-INTENSITY  3      radiant intensity per channel, W/sr
-=========  =====  ==================================
+A spot light (Mitsuba's ``spot``) shines along its axis: with theta the angle between the axis
+and the direction from the light to the shading point, the falloff is 1 for theta within the
+beam width, (cutoff - theta) / (cutoff - beam width) between the beam width and the cutoff, and
+0 beyond (Mitsuba's cos theta > cos cutoff test, src/emitters/spot.cpp). A light that shines every
+way has cos cutoff = cos beam = -2: the falloff is 1.
+
+==============  =====  ====================================================
+column          size   what
+==============  =====  ====================================================
+POSITION        3      world position
+INTENSITY       3      radiant intensity per channel, W/sr (on the axis)
+AXIS            3      the spot's unit axis
+COS_CUTOFF      1      cos of the cutoff angle (-2: no cone)
+COS_BEAM        1      cos of the beam width (-2: no cone)
+CUTOFF          1      the cutoff angle, radians
+INV_TRANSITION  1      1 / (cutoff - beam width) (0 without a ramp)
+==============  =====  ====================================================
 """
 
 from __future__ import annotations
@@ -22,8 +33,9 @@ from ...jit import jit
 from ...plugins import LightTechnique, register
 
 NAME = "point"
-POSITION, INTENSITY = 0, 3
-WIDTH = 6
+POSITION, INTENSITY, AXIS, COS_CUTOFF, COS_BEAM, CUTOFF, INV_TRANSITION = 0, 3, 6, 9, 10, 11, 12
+WIDTH = 13
+NO_CONE = -2.0  # the cosines of a light without a cone: every direction is inside
 # Every light sampling: a point light is sampled one way whatever the others are.
 PLUGIN = register(LightTechnique(NAME, code=1, module=__name__, rank=1, dims=0, emitters=("point",),
                                  light_samplings=("*",), width=WIDTH, delta=True,
@@ -31,22 +43,48 @@ PLUGIN = register(LightTechnique(NAME, code=1, module=__name__, rank=1, dims=0, 
 
 
 def rows(emitters) -> np.ndarray:
-    """``(P, WIDTH)`` rows of P point lights (``emitters.PointEmitters``: position, intensity)."""
-    return np.concatenate([emitters.position, emitters.intensity], axis=1).reshape(-1, WIDTH)
+    """``(P, WIDTH)`` rows of P point lights (``emitters.PointEmitters``)."""
+    count = len(emitters.position)
+    out = np.zeros((count, WIDTH))
+    out[:, POSITION:POSITION + 3] = emitters.position
+    out[:, INTENSITY:INTENSITY + 3] = emitters.intensity
+    out[:, AXIS:AXIS + 3] = emitters.spot_axis
+    cutoff = np.asarray(emitters.cutoff, dtype=np.float64)
+    beam = np.minimum(np.asarray(emitters.beam, dtype=np.float64), cutoff)
+    cone = cutoff < np.pi
+    out[:, COS_CUTOFF] = np.where(cone, np.cos(cutoff), NO_CONE)
+    out[:, COS_BEAM] = np.where(cone, np.cos(beam), NO_CONE)
+    out[:, CUTOFF] = cutoff
+    ramp = cone & (cutoff > beam)
+    out[:, INV_TRANSITION] = np.where(ramp, 1.0 / np.where(ramp, cutoff - beam, 1.0), 0.0)
+    return out
+
+
+@jit
+def falloff(rows, k: int, cos_theta: float) -> float:
+    """The spot falloff of row ``k`` at cos theta from its axis (module docstring)."""
+    if not cos_theta > rows[k, COS_CUTOFF]:
+        return 0.0
+    if cos_theta >= rows[k, COS_BEAM]:
+        return 1.0
+    return (rows[k, CUTOFF] - math.acos(min(cos_theta, 1.0))) * rows[k, INV_TRANSITION]
 
 
 @jit
 def sample(rows, k: int, x, n, u0: float, u1: float):
-    """The direction from ``x`` to point light row ``k``: ``(wi, dist, le, 1, True)``, le = I /
-    d^2; le and pdf 0 if the light is at x."""
+    """The direction from ``x`` to point light row ``k``: ``(wi, dist, le, 1, True)``, le = I
+    falloff / d^2; le and pdf 0 if the light is at x."""
     lx, ly, lz = rows[k, POSITION] - x[0], rows[k, POSITION + 1] - x[1], rows[k, POSITION + 2] - x[2]
     d = math.sqrt(lx * lx + ly * ly + lz * lz)
     if d <= 0.0:
         return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, True
     inv_d = 1.0 / d
-    falloff = inv_d * inv_d
-    le = (rows[k, INTENSITY] * falloff, rows[k, INTENSITY + 1] * falloff, rows[k, INTENSITY + 2] * falloff)
-    return (lx * inv_d, ly * inv_d, lz * inv_d), d, le, 1.0, True
+    wi = (lx * inv_d, ly * inv_d, lz * inv_d)
+    # The spot's axis against the direction from the light to x, -wi.
+    scale = inv_d * inv_d * falloff(rows, k, -(rows[k, AXIS] * wi[0] + rows[k, AXIS + 1] * wi[1]
+                                               + rows[k, AXIS + 2] * wi[2]))
+    le = (rows[k, INTENSITY] * scale, rows[k, INTENSITY + 1] * scale, rows[k, INTENSITY + 2] * scale)
+    return wi, d, le, 1.0, True
 
 
 @jit
