@@ -152,13 +152,13 @@ def test_convert_command(tmp_path, capsys, monkeypatch):
     (["convert", "SCENE", "-o", "out.txt"], ["output must end in .toml"]),
     (["convert", "SCENE", "-o", "missing/out.toml"], ["output folder does not exist"]),
     (["convert", "SAME", "-o", "SAME"], ["replace the scene"]),
-    (["convert", "BAD", "-o", "out.toml"], ["bad.xml:2:", '<bsdf type="roughdielectric" id="glass">']),
+    (["convert", "BAD", "-o", "out.toml"], ["bad.xml:2:", '<bsdf type="hair" id="glass">']),
     (["convert", "nothere.xml"], ["no such scene file"]),
 ])
 def test_convert_refusals_exit_2_with_one_line(argv, words, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "bad.xml").write_text('<scene version="3.0.0">\n<shape type="cube"><bsdf '
-                                      'type="roughdielectric" id="glass"/></shape>\n</scene>')
+                                      'type="hair" id="glass"/></shape>\n</scene>')
     (tmp_path / "same.toml").write_text((SHIPPED / "point_light.toml").read_text())
     replace = {"SCENE": str(DATA / "features.xml"), "BAD": "bad.xml", "SAME": "same.toml"}
     assert cli.main([replace.get(a, a) for a in argv]) == 2

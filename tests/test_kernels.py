@@ -306,6 +306,11 @@ emission = [2.0, 2.0, 2.0]
 type = "point"
 position = [0.0, 3.0, 1.0]
 intensity = [5.0, 5.0, 5.0]
+
+[[lights]]
+type = "directional"
+direction = [0.0, -1.0, 0.0]
+irradiance = [1.0, 0.5, 0.25]
 """
 
 

@@ -809,8 +809,8 @@ def test_ior_names_are_mitsubas():
 
 
 @pytest.mark.parametrize("bsdf, words", [
-    ('<bsdf type="roughdielectric" id="glass"/>', ['<bsdf type="roughdielectric" id="glass">',
-                                                    "roughdielectric is not supported", "transmission"]),
+    ('<bsdf type="roughdielectric" id="glass"><texture type="checkerboard" name="alpha"/></bsdf>',
+     ['<bsdf type="roughdielectric" id="glass">', "textured roughness on a roughdielectric"]),
     ('<bsdf type="dielectric"><float name="int_ior" value="0"/></bsdf>', ["int_ior", ">= 0.01, got 0"]),
     ('<bsdf type="thindielectric"><string name="ext_ior" value="glas"/></bsdf>', ["unknown IOR name 'glas'"]),
     ('<bsdf type="principled"/>', ["bsdf 'principled' is not supported"]),
@@ -1217,13 +1217,13 @@ def test_render_reference_compare_and_check_take_xml_scenes(tmp_path, capsys):
         == 0
     err = capsys.readouterr().err
     assert err.count("tracer: note:") == 4, err  # one per command
-    bad = write(tmp_path, '<shape type="cube">\n<bsdf type="roughdielectric" id="glass"/></shape>',
+    bad = write(tmp_path, '<shape type="cube">\n<bsdf type="hair" id="glass"/></shape>',
                 name="bad.xml")
     assert cli.main(["render", str(bad), "-o", str(tmp_path / "x.exr")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f'tracer: error: {bad}:4: <bsdf type="roughdielectric" id="glass">: roughdielectric '
-                   "is not supported yet (tracer reads dielectric and thindielectric; a rough dielectric's "
-                   "transmission lobe is not written)"]
+    assert err == [f'tracer: error: {bad}:4: <bsdf type="hair" id="glass">: bsdf \'hair\' is not supported; '
+                   "tracer reads diffuse, conductor, roughconductor, plastic, roughplastic, dielectric, "
+                   "roughdielectric, thindielectric and twosided"]
 
 
 def test_substitution_is_bounded_while_it_is_done(tmp_path):
@@ -1267,7 +1267,7 @@ def test_huge_names_give_short_lines_quickly(tmp_path):
 
     big = "m" * (8 << 20)
     cases = {
-        "id": f'<shape type="cube"><bsdf type="roughdielectric" id="{big}"/></shape>',
+        "id": f'<shape type="cube"><bsdf type="hair" id="{big}"/></shape>',
         "type": f'<shape type="cube"><bsdf type="{big}"/></shape>',
         "property": f'<shape type="cube"><float name="{big}" value="1"/></shape>',
         "ref": f'<shape type="cube"><ref id="{big}"/></shape>',

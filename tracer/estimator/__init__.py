@@ -77,11 +77,14 @@ class DirectLighting:
         # ris's BSDF candidates find their emitter without the occluders.
         self.emitter_rays = SceneRays(scene, emitters_only=True) \
             if self.combiner.resamples and strategy.direction_count else None
-        kind, params, behind = scene.materials.shading(plugins.by_code("material"))
+        types = plugins.by_code("material")
+        kind, params, behind = scene.materials.shading(types)
+        transmits = np.array([getattr(types.get(int(k)), "transmits", False) for k in kind], dtype=np.bool_)
         self.surfaces = Surfaces(np.ascontiguousarray(scene.hit_table), kind, params, behind,
                                  float(scene.ray_epsilon), int(scene.triangle_count),
                                  np.ascontiguousarray(scene.corner_normals),
-                                 scene.textures.arrays(len(kind), scene.corner_uv, scene.sphere_frame))
+                                 scene.textures.arrays(len(kind), scene.corner_uv, scene.sphere_frame),
+                                 transmits)
         n_light, n_dir = strategy.light_count, strategy.direction_count
         one_sample = strategy.one_sample_mis
         total = 1.0 if one_sample else float(n_light + n_dir)

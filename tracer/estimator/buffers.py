@@ -27,6 +27,9 @@ class Surfaces(NamedTuple):
     corner_normals : (F, 9) vertex normals of smooth triangles, or (0, 9) (``Scene.corner_normals``).
     textures : the textures and what they feed (``tracer.textures.Textures``), read where the
         build has textures (``FeatureSet.textures``).
+    transmits : (K,) bool, the row's type transmits with a density (``MaterialType.transmits``):
+        its light samples take |cos theta_i| and no receiver bound (read where the build has
+        such a type, ``TRANSMITS``).
     """
 
     hit_table: np.ndarray
@@ -37,6 +40,7 @@ class Surfaces(NamedTuple):
     first_sphere: int
     corner_normals: np.ndarray
     textures: Textures
+    transmits: np.ndarray
 
 
 class Plan(NamedTuple):

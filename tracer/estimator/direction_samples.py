@@ -29,11 +29,11 @@ from ..samplers import dimensions
 @template
 def direction_sample(j: int, sampler, state, params, plan, point, surface, own_dir: float):
     """Direction sample ``j`` of the shading point ``point = (x, geometric, normal, s, t, wo)``
-    of material ``surface = (kind, row)`` with expected count ``own_dir``:
+    of material ``surface = (kind, row, ...)`` with expected count ``own_dir``:
     ``(wi_world, value, pdf_dir, delta)``, value = f |cos| / (n̄_d p_d) as RGB (0: nothing to
     trace), pdf_dir the technique's own pdf of the direction."""
     x, geometric, normal, s, t, wo = point
-    kind, material = surface
+    kind, material = surface[0], surface[1]
     u = dispatch.uniform_pair(sampler, state, dimensions.direction(plan.light_slots, j))
     wi, weight, pdf_dir, delta = dispatch.direction_sample(
         kind, params, material, wo,

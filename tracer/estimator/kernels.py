@@ -38,7 +38,7 @@ from .combiners import ris
 from .direction_samples import direction_arrays, direction_sample, direction_value, environment_value
 
 # Bound per build (``tracer.kernels.dispatch``): what the render takes and does.
-LIGHT_SAMPLES = DIRECTION_SAMPLES = LEARNS = RESAMPLES = TEXTURES = ENVIRONMENT = False
+LIGHT_SAMPLES = DIRECTION_SAMPLES = LEARNS = RESAMPLES = TEXTURES = ENVIRONMENT = TRANSMITS = False
 
 
 @kernel
@@ -54,7 +54,7 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
     hit_table, kinds, params, eps = (surfaces.hit_table, surfaces.material_kind, surfaces.material_params,
                                      surfaces.eps)
     first_sphere, behind, corner_normals = surfaces.first_sphere, surfaces.behind, surfaces.corner_normals
-    textures = surfaces.textures
+    textures, transmits = surfaces.textures, surfaces.transmits
     # A textured hit's material row, its textured columns set for that hit (``tracer.textures``).
     scratch = np.empty((1, params.shape[1]))
     spheres = light_tables.spheres
@@ -107,7 +107,13 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
         if TEXTURES:
             here, material = lookup.textured_row(textures, params, material, hit_table, first_sphere, p, x,
                                                  scratch)
-        surface = (kind, material)
+        # The normal that bounds which lights can reach the surface (the BVH's horizon test):
+        # none for a type that transmits, which light from below reaches too.
+        receiver = normal
+        through = TRANSMITS and transmits[material]
+        if through:
+            receiver = (0.0, 0.0, 0.0)
+        surface = (kind, material, receiver, through)
         state = dispatch.start(sampler, pixel[lane], sample[lane])
         if RESAMPLES:
             u_left[lane] = dispatch.uniform(sampler, state, dimensions.TECHNIQUE_CHOICE)
@@ -167,7 +173,7 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
                 for axis in range(3):
                     dir_point[n_direction, axis] = x[axis]
                     dir_normal[n_direction, axis] = geometric[axis]
-                    dir_shading[n_direction, axis] = normal[axis]
+                    dir_shading[n_direction, axis] = receiver[axis]
                 n_direction = _put(dir_origin, dir_dir, dir_value, dir_lane, n_direction, origin, wi_world,
                                    value, lane)
     return n_shadow, n_direction

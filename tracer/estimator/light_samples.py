@@ -19,14 +19,16 @@ from ..frame import to_local
 from ..kernels import UNBOUND, template
 from ..samplers import dimensions
 
-LEARNS = DIRECTION_SAMPLES = False  # bound per build (``tracer.kernels``)
+LEARNS = DIRECTION_SAMPLES = TRANSMITS = False  # bound per build (``tracer.kernels``)
 
 
 @template
 def light_sample(j: int, sampler, state, selection, technique, rows, environment, params, plan, point,
                  surface, own):
     """Light sample ``j`` of the shading point ``point = (x, geometric, normal, s, t, wo)`` of
-    material ``surface = (kind, row)``, taken with expected counts ``own = (n̄_l, n̄_d)``, from
+    material ``surface = (kind, row, receiver, through)`` (receiver: the normal bounding which
+    lights reach it, 0 for a type that transmits, ``through``), taken with expected counts
+    ``own = (n̄_l, n̄_d)``, from
     the light tables' ``selection``, ``technique``, ``rows`` and ``environment``, read before
     the kernel's loop and passed apart (``lights.sample_with``; 12 parameters for that reason):
     ``(wi_world, dist, value, raw, w_balance, share_t)``.
@@ -36,19 +38,20 @@ def light_sample(j: int, sampler, state, selection, technique, rows, environment
     the learning (``tracer.tuning``; 1 unless the build learns).   dist : to the light point
     (inf for the environment); 0 with a zero value where the sample is invalid."""
     x, geometric, normal, s, t, wo = point
-    kind, material = surface
+    kind, material, receiver, through = surface
     own_light, own_dir = own
     zero = (0.0, 0.0, 0.0)
     u = dispatch.uniform_pair(sampler, state, dimensions.light_point(j))
     wi_world, dist, le, pdf_light, delta = lights.sample_with(
-        selection, technique, rows, environment, x, geometric, normal,
+        selection, technique, rows, environment, x, geometric, receiver,
         dispatch.uniform(sampler, state, dimensions.light_choice(j)),
         u[0], u[1])
     if not pdf_light > 0.0:
         return wi_world, 0.0, zero, zero, 1.0, 1.0
     wi = to_local(s, t, normal, wi_world)
     f, pdf_bsdf = dispatch.material_eval_pdf(kind, params, material, wo, wi)
-    c = max(wi[2], 0.0) / (own_light * pdf_light)
+    # A type that transmits takes light from below too: |cos theta_i| (``MaterialType.transmits``).
+    c = (abs(wi[2]) if TRANSMITS and through else max(wi[2], 0.0)) / (own_light * pdf_light)
     w, w_balance, share_t = 1.0, 1.0, 1.0
     if DIRECTION_SAMPLES:
         if own_dir > 0.0 and not delta:

@@ -82,7 +82,9 @@ class FeatureSet:
         return {"LIGHT_SAMPLES": self.light_samples, "DIRECTION_SAMPLES": self.direction_samples,
                 "LEARNS": self.learns, "RESAMPLES": plugins.get("combiner", self.combiner).resamples,
                 "PER_POINT_SELECTION": bool(getattr(selection, "per_point", False)),
-                "TEXTURES": self.textures, "ENVIRONMENT": self.environment}
+                "TEXTURES": self.textures, "ENVIRONMENT": self.environment,
+                "TRANSMITS": any(getattr(plugins.get("material", m), "transmits", False)
+                                 for m in self.materials)}
 
     def without(self, fields: tuple[str, ...]) -> "FeatureSet":
         """This feature set with ``fields`` at fixed defaults (no materials or techniques, the

@@ -71,7 +71,7 @@ RIGID_TOLERANCE = 1e-3
 
 _REFLECTANCES = ("reflectance", "diffuse_reflectance", "specular_reflectance")
 _READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided",
-                         "dielectric", "thindielectric"})
+                         "dielectric", "thindielectric", "roughdielectric"})
 _DIELECTRICS = frozenset({"dielectric", "roughdielectric", "thindielectric"})
 # Mitsuba 3.9.1's BSDF plugins (src/bsdfs/*.cpp): an unused declaration of one that tracer does
 # not read is accepted unread (it changes no image); any other type is unknown to Mitsuba too.
@@ -83,9 +83,6 @@ _UNSUPPORTED_ANYWHERE = {
     "phase": "participating media are not supported (tracer renders surfaces in vacuum)",
     "volume": "participating media are not supported (tracer renders surfaces in vacuum)",
 }
-_DIELECTRIC = ("{kind} is not supported yet (tracer reads dielectric and thindielectric; a rough "
-               "dielectric's transmission lobe is not written)")
-
 
 def read_mitsuba_scene(path: str, width: int | None = None, height: int | None = None,
                        base: Path | None = None, notify: Callable[[str], None] | None = None,
@@ -892,8 +889,6 @@ class _SceneReader:
     def bsdf_triple(self, p: _Plugin) -> tuple[str, dict[str, object]]:
         """tracer's material type and parameters for the Mitsuba BSDF ``p`` (not twosided)."""
         kind = p.type
-        if kind == "roughdielectric":
-            p.fail(_DIELECTRIC.format(kind=kind))
         if kind == "diffuse":
             values: dict[str, object] = {
                 "reflectance": self.colour(p, "reflectance", 0.5, "reflectance", hi=1.0)}
@@ -912,15 +907,21 @@ class _SceneReader:
                 "nonlinear": p.boolean("nonlinear", False)}
             if kind == "roughplastic":
                 values.update(self.roughness(p))
-        elif kind in ("dielectric", "thindielectric"):
+        elif kind in _DIELECTRICS:
             values = {
                 "specular_reflectance": p.color("specular_reflectance", 1.0, "reflectance", hi=1.0),
                 "specular_transmittance": p.color("specular_transmittance", 1.0, "reflectance", hi=1.0),
                 "int_ior": self.ior(p, "int_ior", "bk7"),
                 "ext_ior": self.ior(p, "ext_ior", "air")}
+            if kind == "roughdielectric":
+                values.update(self.roughness(p))
+                if isinstance(values["alpha"], Texture):
+                    # Its inside row (the indices swapped) would need the texture bound too.
+                    p.fail("a textured roughness on a roughdielectric is not supported (give alpha as a "
+                           "number)")
         else:
             p.fail(f"bsdf '{shown(kind)}' is not supported; tracer reads diffuse, conductor, roughconductor, "
-                   "plastic, roughplastic, dielectric, thindielectric and twosided")
+                   "plastic, roughplastic, dielectric, roughdielectric, thindielectric and twosided")
         p.done()
         return kind, values
 
