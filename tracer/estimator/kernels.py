@@ -103,16 +103,17 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
         if not reflects:
             continue
         point = (x, geometric, normal, s, t, wo)
-        here = params
-        if TEXTURES:
-            here, material = lookup.textured_row(textures, params, material, hit_table, first_sphere, p, x,
-                                                 scratch)
         # The normal that bounds which lights can reach the surface (the BVH's horizon test):
-        # none for a type that transmits, which light from below reaches too.
+        # none for a type that transmits, which light from below reaches too. Read from the
+        # shading row itself: after a texture lookup ``material`` indexes the scratch table.
         receiver = normal
         through = TRANSMITS and transmits[material]
         if through:
             receiver = (0.0, 0.0, 0.0)
+        here = params
+        if TEXTURES:
+            here, material = lookup.textured_row(textures, params, material, hit_table, first_sphere, p, x,
+                                                 scratch)
         surface = (kind, material, receiver, through)
         state = dispatch.start(sampler, pixel[lane], sample[lane])
         if RESAMPLES:

@@ -219,7 +219,7 @@ def build_tables(scene, light_selection: str = "power",
     # two triangles bound it exactly).
     spheres = emitter_spheres(scene.vertices[scene.faces[tri]], scene.shape_of_triangle[tri],
                               scene.ray_epsilon, records["sphere"].spheres, records["sphere"].owner)
-    environment = environment_light.table(getattr(scene, "environment", None), environment_candidate)
+    environment = environment_light.table(scene.environment, environment_candidate)
     return LightTables(tables, technique, np.ascontiguousarray(rows), candidate_of_prim, spheres,
                        environment), candidates.owner
 

@@ -173,21 +173,20 @@ def spheres(scene) -> SphereEmitters:
                           spheres=scene.spheres[sph], emission=scene.sphere_emission[sph])
 
 
-def spot_solid_angle(cutoff: float, beam: float, nodes: int = 4096) -> float:
+def spot_solid_angle(cutoff: float, beam: float) -> float:
     """The integral of a spot's falloff over the sphere, angles in radians (4 pi for a light that
-    shines every way, cutoff pi):
-    2 pi times the integral over theta of falloff(theta) sin(theta), the falloff 1 within the beam
-    width and linear in theta to 0 at the cutoff (Mitsuba's ``spot``); exact to 1e-7 by the
-    midpoint rule on the ramp."""
+    shines every way, cutoff pi): 2 pi times the integral over theta of falloff(theta)
+    sin(theta), the falloff 1 within the beam width and (c - theta) / (c - b) from there to the
+    cutoff c (Mitsuba's ``spot``). In closed form, since the integral of (c - theta) sin(theta)
+    from b to c is (c - b) cos b + sin b - sin c."""
     if cutoff >= np.pi:
         return 4.0 * np.pi
     beam = min(beam, cutoff)
     inner = 2.0 * np.pi * (1.0 - np.cos(beam))
     if cutoff <= beam:
-        return inner
-    theta = beam + (np.arange(nodes) + 0.5) * (cutoff - beam) / nodes
-    ramp = (cutoff - theta) / (cutoff - beam)
-    return float(inner + 2.0 * np.pi * np.sum(ramp * np.sin(theta)) * (cutoff - beam) / nodes)
+        return float(inner)
+    ramp = ((cutoff - beam) * np.cos(beam) + np.sin(beam) - np.sin(cutoff)) / (cutoff - beam)
+    return float(inner + 2.0 * np.pi * ramp)
 
 
 def points(scene) -> PointEmitters:
@@ -207,11 +206,10 @@ def points(scene) -> PointEmitters:
 def directionals(scene) -> DirectionalEmitters:
     """Directional lights: flux pi r^2 mean(E) over the scene's bounding sphere (what a disk of
     the scene's size catches), bounds the scene's box, emitting every way."""
-    irradiance = getattr(scene, "directional_irradiance", np.zeros((0, 3)))
+    irradiance = scene.directional_irradiance
     lit = np.flatnonzero(irradiance.max(axis=1, initial=0.0) > 0.0)
     lo, hi = scene_box(scene)
-    radius = 0.5 * float(np.linalg.norm(hi - lo))
-    radius = radius if radius > 0.0 else 1.0
+    radius = scene_radius(lo, hi)
     axis = np.tile([0.0, 0.0, 1.0], (len(lit), 1))
     return DirectionalEmitters(np.pi * radius * radius * irradiance[lit].mean(axis=1),
                                (-1 - len(scene.point_position) - lit).astype(np.int64), np.ones(len(lit)),
@@ -226,15 +224,21 @@ def environment(scene) -> Emitters:
     the light BVH, are the scene's box, emitting every way."""
     from . import environment as light
 
-    env = getattr(scene, "environment", None)
+    env = scene.environment
     lo, hi = scene_box(scene)
-    radius = 0.5 * float(np.linalg.norm(hi - lo))
-    power = light.flux(env, radius if radius > 0.0 else 1.0) if env is not None else 0.0
+    power = light.flux(env, scene_radius(lo, hi)) if env is not None else 0.0
     lit = 1 if power > 0.0 else 0
     axis = np.tile([0.0, 0.0, 1.0], (lit, 1))
-    owner = -1 - len(scene.point_position) - len(getattr(scene, "directional_irradiance", ()))
+    owner = -1 - len(scene.point_position) - len(scene.directional_irradiance)
     return Emitters(np.full(lit, power), np.full(lit, owner, dtype=np.int64),
                     np.ones(lit), np.tile(lo, (lit, 1)), np.tile(hi, (lit, 1)), axis, -np.ones(lit), [])
+
+
+def scene_radius(lo: np.ndarray, hi: np.ndarray) -> float:
+    """The radius of the bounding sphere of the box ``lo, hi`` (1 for an empty scene): what the
+    flux of a light at infinity is measured over."""
+    radius = 0.5 * float(np.linalg.norm(hi - lo))
+    return radius if radius > 0.0 else 1.0
 
 
 def scene_box(scene) -> tuple[np.ndarray, np.ndarray]:

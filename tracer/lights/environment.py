@@ -68,7 +68,7 @@ def cell_weights(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     values = np.maximum(np.asarray(values, dtype=np.float64), 0.0)
     rows = values[:-1] + values[1:]  # rows r and r + 1
     mean = 0.25 * (rows + np.roll(rows, -1, axis=1))  # columns c and c + 1
-    cos_edge = np.cos(np.pi * np.arange(height) / (height - 1))
+    cos_edge = _cos_edges(height)
     band = (cos_edge[:-1] - cos_edge[1:]) * (2.0 * np.pi / width)
     solid_angle = np.repeat(band[:, None], width, axis=1)
     return mean * solid_angle, solid_angle
@@ -90,7 +90,7 @@ def table(environment, candidate: int) -> EnvironmentTable:
     for r in range(height - 1):
         column_cdf[r] = _cdf(weight[r])
     cell_pdf = weight / total / solid_angle if total > 0.0 else np.zeros_like(weight)
-    cos_edge = np.cos(np.pi * np.arange(height) / (height - 1))
+    cos_edge = _cos_edges(height)
     to_world = np.ascontiguousarray(environment.to_world, dtype=np.float64)
     return EnvironmentTable(np.ascontiguousarray(texels, dtype=np.float32), np.ascontiguousarray(to_world.T),
                             to_world, row_cdf, column_cdf, cell_pdf, cos_edge, int(candidate))
@@ -106,6 +106,11 @@ def power_integral(environment) -> float:
 def flux(environment, radius: float) -> float:
     """The environment's flux for the ``power`` selection: pi r^2 x :func:`power_integral`."""
     return math.pi * radius * radius * power_integral(environment)
+
+
+def _cos_edges(height: int) -> np.ndarray:
+    """(H,) cos theta at the rows of a map of H rows, which are the edges of its cells' rows."""
+    return np.cos(np.pi * np.arange(height) / (height - 1))
 
 
 def _cdf(weight: np.ndarray) -> np.ndarray:
@@ -125,17 +130,16 @@ def _invert(cdf, u: float):
     one of positive width) and where in it u lies, in [0, 1)."""
     n = len(cdf) - 1
     lo, hi = 0, n
-    while hi - lo > 1:  # cdf[lo] <= u < cdf[hi], as far as u < 1
+    # cdf[lo] <= u < cdf[hi] throughout (cdf[0] = 0 <= u < 1 = cdf[n]), so the interval found
+    # has positive width.
+    while hi - lo > 1:
         mid = (lo + hi) // 2
         if cdf[mid] <= u:
             lo = mid
         else:
             hi = mid
-    while lo > 0 and not cdf[lo + 1] > cdf[lo]:  # u at 1 - ulp past the last interval's end
-        lo -= 1
-    width = cdf[lo + 1] - cdf[lo]
-    rest = (u - cdf[lo]) / width if width > 0.0 else 0.0
-    return lo, min(max(rest, 0.0), 0.9999999999999999)
+    rest = (u - cdf[lo]) / (cdf[lo + 1] - cdf[lo])
+    return lo, min(max(rest, 0.0), 0.9999999999999999)  # rounding may reach 1
 
 
 @jit
