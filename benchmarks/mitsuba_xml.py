@@ -56,6 +56,7 @@ REFERENCES = {
     "environment": (96, 72, 32, 256),
     "delta_lights": (96, 72, 32, 256),
     "rough_glass": (96, 72, 32, 256),
+    "mask": (96, 72, 32, 256),
 }
 
 # tracer's side of the comparison (--compare and tests/test_mitsuba_agreement.py).

@@ -26,7 +26,7 @@ def every_key_scene(tmp_path):
         "render": {"spp": 4, "strategy": "mis", "light_sampling": "area", "sampler": "independent"},
         "camera": CAMERA,
         "materials": {
-            "m": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5], "twosided": True},
+            "m": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5], "twosided": True, "opacity": 0.75},
             "checks": {"type": "diffuse", "reflectance": {"texture": "checkerboard", "color0": 0.9,
                                                           "color1": [0.1, 0.2, 0.3], "to_uv": [[2, 0, 0], [0, 2, 0]]}},
             "image": {"type": "diffuse", "reflectance": {"texture": "bitmap", "file": "t.png", "raw": True,
@@ -51,7 +51,7 @@ def every_key_scene(tmp_path):
 def test_every_declared_key_is_read(tmp_path):
     doc = every_key_scene(tmp_path)
     given = {"top level": set(doc), "[render]": set(doc["render"]), "[camera]": set(doc["camera"]),
-             "[materials.NAME]": {"type", "twosided"},
+             "[materials.NAME]": {"type", "twosided", "opacity"},
              "a material parameter's texture": {key for m in doc["materials"].values()
                                                 for value in m.values() if isinstance(value, dict) for key in value}}
     for shape in doc["shapes"]:

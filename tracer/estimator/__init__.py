@@ -23,6 +23,7 @@ module                  what
 ``light_samples.py``    emitter sampling: one light sample and its value
 ``direction_samples.py``  direction sampling: one direction sample; what its hit adds
 ``counts.py``           how many samples of each technique a shading point takes
+``cutouts.py``          rays through surfaces that stop a fraction of the light (masks)
 ``combiners/``          sum, mis, one_sample, ris: the plug-ins that combine them
 ``kernels.py``          the wavefront kernels ``shade`` and ``gather``
 ======================  ================================================================
@@ -50,6 +51,7 @@ from ..tuning import Tuning
 from . import kernels as estimator_kernels
 from .buffers import CameraHits, Outputs, Plan, RayBuffer, Reservoirs, Surfaces
 from .combiners import ris
+from .cutouts import Cutouts, present
 
 __all__ = ["DirectLighting", "Plan", "Surfaces", "combiner_of"]
 
@@ -85,6 +87,12 @@ class DirectLighting:
                                  np.ascontiguousarray(scene.corner_normals),
                                  scene.textures.arrays(len(kind), scene.corner_uv, scene.sphere_frame),
                                  transmits)
+        # Rows past the table's (a two-sided type's inside) are never a primitive's own row.
+        opacity = np.ones(len(kind))
+        opacity[:len(scene.materials.opacity)] = scene.materials.opacity
+        self.cutouts = Cutouts(self.rays, self.surfaces.hit_table, self.surfaces.first_sphere,
+                               self.surfaces.eps, opacity, self.surfaces.textures) \
+            if present(opacity, self.surfaces.textures.opacity) else None
         n_light, n_dir = strategy.light_count, strategy.direction_count
         one_sample = strategy.one_sample_mis
         total = 1.0 if one_sample else float(n_light + n_dir)
@@ -106,7 +114,7 @@ class DirectLighting:
         features = FeatureSet(materials, technique_names(self.lights.tables), strategy.light_selection,
                               sampler, strategy.direction_technique if strategy.direction_count else None,
                               self.combiner.name, bool(strategy.light_count), bool(strategy.direction_count),
-                              strategy.learns, textures=bool(self.scene.textures),
+                              strategy.learns, textures=bool(self.scene.textures.bindings),
                               environment=self.scene.environment is not None)
         return features.widened() if shared_builds() else features
 
@@ -163,6 +171,9 @@ class DirectLighting:
         radiance, shadow, direction, reservoirs, lane_stats = out
         tables = self.lights.tables
         prim = self.rays.first_hit(origins, dirs)
+        if self.cutouts is not None:
+            origins = np.array(origins)  # moved past the cutouts the lanes pass: the caller's stay
+            self.cutouts.camera(prim, origins, dirs, pixel, sample, sampler.seed_key)
         n_shadow, n_direction = made.function(estimator_kernels.shade)(
             CameraHits(prim, origins, dirs, pixel, sample), sampler, self.surfaces, tables, self.plan, tuned,
             out)
@@ -176,8 +187,13 @@ class DirectLighting:
             d, found = slice(0, 0), found[:0]
         s = slice(0, n_shadow)
         blocked = self.rays.occluded(shadow.origin[s], shadow.dir[s], shadow.tmax[s])
+        if self.cutouts is not None and blocked.any():
+            self.cutouts.shadow(shadow.origin[s], shadow.dir[s], shadow.tmax[s], shadow.value[s],
+                                shadow.v2[s], blocked)
         if not self.combiner.resamples:
             found = self.rays.first_hit(direction.origin[d], direction.dir[d])
+            if self.cutouts is not None and n_direction:
+                self.cutouts.direction(found, direction.origin[d], direction.dir[d], direction.value[d])
         made.function(estimator_kernels.gather)(radiance, self.surfaces, tables, self.plan, tuned, shadow,
                                                 blocked, direction, found, lane_stats)
         return radiance, lane_stats
@@ -205,5 +221,7 @@ class DirectLighting:
             calls.append(Call((radiance, self.surfaces, tables, self.plan, direction, found, shadow,
                                reservoirs),
                               template=ris.resample))
+        if self.cutouts is not None:
+            calls.extend(self.cutouts.calls(sampler))
         features = self.features(samplers.name_of(sampler))
         return compile_all(features, calls, features.describe(), progress)

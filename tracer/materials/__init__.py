@@ -53,11 +53,12 @@ TYPES = plugins.Live("material")
 BY_CODE = plugins.Live("material", by="code")
 
 
-def table(materials: list[tuple[str, str, dict[str, object]]], twosided: list[bool] | None = None
-          ) -> MaterialTable:
+def table(materials: list[tuple[str, str, dict[str, object]]], twosided: list[bool] | None = None,
+          opacity: list[float] | None = None) -> MaterialTable:
     """A material table from ``(name, type name, parameters by name)`` triples; row 0 is the
     black material, so the i-th triple is row i + 1. ``twosided``: per triple, whether the
-    material reflects on both sides (default: all do, as tracer's TOML materials)."""
+    material reflects on both sides (default: all do, as tracer's TOML materials); ``opacity``:
+    per triple, the fraction of light it stops (default: 1, opaque)."""
     rows = [np.zeros(0)]
     kinds = [NONE]
     for name, type_name, values in materials:
@@ -72,8 +73,9 @@ def table(materials: list[tuple[str, str, dict[str, object]]], twosided: list[bo
     for i, r in enumerate(rows):
         params[i, : len(r)] = r
     sides = [True] + (list(twosided) if twosided is not None else [True] * len(materials))
+    stops = [1.0] + (list(opacity) if opacity is not None else [1.0] * len(materials))
     return MaterialTable(np.asarray(kinds, dtype=np.int8), params, ["(none)"] + [m[0] for m in materials],
-                         np.asarray(sides, dtype=np.bool_))
+                         np.asarray(sides, dtype=np.bool_), np.asarray(stops, dtype=np.float64))
 
 
 def lobes(kind: int) -> int:

@@ -200,17 +200,26 @@ class MaterialTable:
     twosided : (K,) bool: the material reflects on both sides of a surface (tracer's TOML
         materials); False: on the side the shading normal points to only, black from behind
         (Mitsuba's BSDFs unless wrapped in ``twosided``). Default: all True.
+    opacity : (K,) float64 in [0, 1]: the fraction of light a surface of the material stops
+        (Mitsuba's ``mask``; 1: opaque, the default). A hit is passed through with probability
+        1 - opacity, and a shadow ray crossing the surface carries that fraction on
+        (``tracer.estimator.cutouts``). A textured opacity is bound in the scene's texture table
+        (``TextureTable.cutouts``); this column then holds the texture's mean.
     """
 
     kind: np.ndarray
     params: np.ndarray
     names: list[str]
     twosided: np.ndarray | None = None
+    opacity: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.twosided is None:
             self.twosided = np.ones(len(self.kind), dtype=np.bool_)
         self.twosided = np.asarray(self.twosided, dtype=np.bool_)
+        if self.opacity is None:
+            self.opacity = np.ones(len(self.kind))
+        self.opacity = np.asarray(self.opacity, dtype=np.float64)
 
     def shading(self, types: dict[int, MaterialType]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The table as the kernels shade with it (``types`` by code): ``kind (K',)``, ``params

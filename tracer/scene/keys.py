@@ -77,6 +77,9 @@ MATERIAL = Section("[materials.NAME]", "One material; NAME is any TOML key, whic
                    "The other keys are the type's parameters (plug-in page).", (
     Key("type", "string", REQUIRED, "a material type: diffuse, mirror, conductor, ... (plug-in page)"),
     Key("twosided", "boolean", "true", "reflects on both sides; false: black seen from behind"),
+    Key("opacity", "number in [0, 1] or a texture", "1", "the fraction of light the surface stops "
+        "(Mitsuba's mask): a hit is passed through with probability 1 - opacity, a shadow ray "
+        "carries that fraction on; not on an emitting shape"),
 ))
 
 TEXTURE = Section("a material parameter's texture", "Any parameter the plug-in page marks "

@@ -28,7 +28,7 @@ from ..camera import Camera
 from ..errors import InputError, one_line, shown
 from ..materials import conductor, plastic
 from ..record import MAX_SAMPLE_INDEX
-from ..textures import FILTERS, WRAPS, Texture, bind
+from ..textures import FILTERS, LUMINANCE, WRAPS, Texture, bind
 from ..textures.bitmap import read_texels
 from . import spectrum
 from .environment import Environment, rotation_problem
@@ -71,7 +71,7 @@ RIGID_TOLERANCE = 1e-3
 
 _REFLECTANCES = ("reflectance", "diffuse_reflectance", "specular_reflectance")
 _READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided",
-                         "dielectric", "thindielectric", "roughdielectric"})
+                         "dielectric", "thindielectric", "roughdielectric", "mask"})
 _DIELECTRICS = frozenset({"dielectric", "roughdielectric", "thindielectric"})
 # Mitsuba 3.9.1's BSDF plugins (src/bsdfs/*.cpp): an unused declaration of one that tracer does
 # not read is accepted unread (it changes no image); any other type is unknown to Mitsuba too.
@@ -265,6 +265,7 @@ class _SceneReader:
         self.geometry = _Geometry()
         self.triples: list[tuple[str, str, dict[str, object]]] = []
         self.sides: list[bool] = []
+        self.opacities: dict[int, object] = {}  # a masked row's opacity: a number or a Texture
         self.rows: dict[tuple[int, bool], int] = {}
         self.names: set[str] = set()
         self.emitter_owner: dict[int, Element] = {}
@@ -617,6 +618,9 @@ class _SceneReader:
             emission = self.area_radiance(emitter)
         if bsdfs:
             material = self.material(*bsdfs[0])
+            if emitters and material in self.opacities:
+                bsdfs[0][1].fail("a mask on an emitting shape is not supported (tracer's emitters are "
+                                 "opaque)", p.element)
         elif emitters:
             material = 0
         else:
@@ -762,16 +766,20 @@ class _SceneReader:
             if id(bsdf) in checked:
                 continue
             p = self.plugin(bsdf)
-            if p.type != "twosided":
+            if p.type not in ("twosided", "mask"):
                 if p.type in _READ_BSDFS or p.type not in _MITSUBA_BSDFS:
                     self.bsdf_triple(p)
                 checked.add(id(bsdf))
                 continue
             nested = p.nested("bsdf")
-            if not nested or len(nested) > 2:
+            if p.type == "mask":
+                self.mask_opacity(p)
+                if len(nested) != 1:
+                    p.fail(f"mask needs one nested bsdf, not {len(nested)}")
+            elif not nested or len(nested) > 2:
                 p.fail(f"twosided needs one or two nested BSDFs, not {len(nested)}")
             for inner, naming in nested:
-                if inner.attrs.get("type") in _DIELECTRICS:
+                if p.type == "twosided" and inner.attrs.get("type") in _DIELECTRICS:
                     naming.fail("a dielectric inside a twosided (Mitsuba nests only BSDFs without "
                                 "transmission)", bsdf)
             p.done()
@@ -780,6 +788,8 @@ class _SceneReader:
             work.extend(("enter", inner, naming) for inner, naming in reversed(nested))
 
     def material(self, bsdf: Element, written: Element) -> int:
+        if bsdf.attrs.get("type") == "mask":
+            return self.masked_material(bsdf)
         twosided = bsdf.attrs.get("type") == "twosided"
         key = (id(bsdf), twosided)
         if key in self.rows:
@@ -804,6 +814,38 @@ class _SceneReader:
         row = self.add_material(name, type_name, values, twosided or type_name in _DIELECTRICS)
         self.rows[key] = row
         return row
+
+    def masked_material(self, bsdf: Element) -> int:
+        """The row of Mitsuba's ``mask``: its nested BSDF's material in a row of its own, whose
+        opacity (a number or a texture; default 0.5, as Mitsuba's) is the mask's
+        (``MaterialTable.opacity``, ``tracer.estimator.cutouts``)."""
+        key = (id(bsdf), False)
+        if key in self.rows:
+            return self.rows[key]
+        p = self.plugin(bsdf)
+        opacity = self.mask_opacity(p)
+        nested = p.nested("bsdf")
+        if len(nested) != 1:
+            p.fail(f"mask needs one nested bsdf, not {len(nested)}")
+        inner, naming = nested[0]
+        if inner.attrs.get("type") == "mask":
+            naming.fail("a mask inside a mask is not supported (give one mask the product of the "
+                        "opacities)", bsdf)
+        p.done()
+        inner_row = self.material(inner, naming)
+        name, type_name, values = self.triples[inner_row - 1]
+        row = self.add_material(self.unique(bsdf.attrs.get("id") or f"mask of {name}"), type_name, values,
+                                self.sides[inner_row - 1])
+        self.opacities[row] = opacity
+        self.rows[key] = row
+        return row
+
+    def mask_opacity(self, p: _Plugin) -> object:
+        """A ``mask``'s opacity: a texture, or a number in [0, 1] (a colour's luminance, as
+        Mitsuba's ``eval_1`` reads one, clamped as its ``eval_opacity`` clamps)."""
+        return self.textured(p, "opacity",
+                             lambda: float(np.clip(p.color("opacity", 0.5, "other") @ LUMINANCE, 0.0, 1.0)),
+                             "other")
 
     def texture(self, element: Element, kind: str) -> Texture:
         """The texture ``element`` (read once: references share it); ``kind`` as for colours."""
@@ -921,7 +963,7 @@ class _SceneReader:
                            "number)")
         else:
             p.fail(f"bsdf '{shown(kind)}' is not supported; tracer reads diffuse, conductor, roughconductor, "
-                   "plastic, roughplastic, dielectric, roughdielectric, thindielectric and twosided")
+                   "plastic, roughplastic, dielectric, roughdielectric, thindielectric, twosided and mask")
         p.done()
         return kind, values
 
@@ -1011,8 +1053,10 @@ class _SceneReader:
         g = self.geometry
         triples = [(name, type_name, self.bind_textures(row, type_name, values))
                    for row, (name, type_name, values) in enumerate(self.triples, start=1)]
+        opacity = [g.textures.bind_opacity(row, self.opacities.get(row, 1.0))
+                   for row in range(1, len(self.triples) + 1)]
         try:
-            table = materials.table(triples, self.sides)
+            table = materials.table(triples, self.sides, opacity)
         except ValueError as exc:  # the parameter ranges every reader is held to (Param.check)
             raise InputError(str(exc), self.document.path) from None
         return g.scene(self.document.path, camera, table, self.positions, self.intensities, self.render,

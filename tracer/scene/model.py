@@ -222,6 +222,8 @@ class Scene:
             add("corner_normals", self.corner_normals, "<f8")
         if not np.all(self.materials.twosided):
             add("material_twosided", self.materials.twosided, "<i1")
+        if np.any(self.materials.opacity < 1.0):  # masks; likewise (a textured one: in the textures')
+            add("material_opacity", self.materials.opacity, "<f8")
         if self.textures:  # likewise: scenes without textures keep their digests
             digest.update(self.textures.digest())
             add("corner_uv", self.corner_uv, "<f8")

@@ -366,6 +366,7 @@ def _read_materials(path: str, table: Any, base: Path, textures: TextureTable) -
     top = _Reader(path, "materials", table, extra=tuple(table) if isinstance(table, dict) else ())
     triples = []
     sides: list[bool] = []
+    opacity: list[float] = []
     images: dict[tuple[str, bool], np.ndarray] = {}
     for row, name in enumerate(table, start=1):  # row 0 is the black material
         m = _Reader(path, f"materials.{name}", top.raw(name), keys.MATERIAL)
@@ -387,6 +388,11 @@ def _read_materials(path: str, table: Any, base: Path, textures: TextureTable) -
                 values[p.name] = m.vector(p.name, p.size, default=default, lo=p.lo, lo_open=p.lo_open,
                                           hi=p.hi)
         sides.append(m.boolean("twosided", default=True))
+        if isinstance(m.raw("opacity", None), dict):
+            opacity.append(textures.bind_opacity(row, _read_texture(
+                _Reader(path, f"materials.{name}.opacity", m.raw("opacity"), keys.TEXTURE), base, images)))
+        else:
+            opacity.append(m.number("opacity", default=1.0, lo=0.0, hi=1.0))
         m.done()
         try:
             values = bind(textures, row, kind, values, path)
@@ -395,7 +401,7 @@ def _read_materials(path: str, table: Any, base: Path, textures: TextureTable) -
         triples.append((name, kind.name, values))
     top.done()
     try:
-        return materials.table(triples, sides)
+        return materials.table(triples, sides, opacity)
     except ValueError as exc:  # unreachable while the checks above hold each Param's range
         raise InputError(str(exc), path) from None
 
@@ -469,6 +475,11 @@ class _Geometry:
         """The scene of these shapes with the rest a reader read: every reader ends here.
         ``spots``: per point light ``(axis, cutoff, beam)`` (degrees; 180, 180: every way), or
         None for all omnidirectional; ``directionals``: ``(direction, irradiance)`` per light."""
+        for i, shape in enumerate(self.shapes):
+            cutout = table.opacity[shape.material] < 1.0 or shape.material in self.textures.cutouts
+            if shape.emissive and cutout:
+                raise InputError(f"shape {i + 1} emits, and its material '{table.names[shape.material]}' "
+                                 "has an opacity (a mask): tracer's emitters are opaque", path)
         omni = (np.array([0.0, 0.0, 1.0]), 180.0, 180.0)
         spots = spots if spots is not None else [omni] * len(point_position)
         directionals = directionals or []

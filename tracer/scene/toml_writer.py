@@ -43,7 +43,8 @@ def write_scene(scene: Scene, path: str | os.PathLike[str], source: str | None =
     cannot be written as TOML."""
     if scene.textures:
         # The TOML format has no textures yet: writing their means would render another image.
-        names = sorted({b.param for b in scene.textures.bindings})
+        names = sorted({b.param for b in scene.textures.bindings}
+                       | ({"opacity"} if scene.textures.cutouts else set()))
         raise InputError(f"the scene has textures ({', '.join(names)}), which tracer's TOML format does not "
                          "hold yet: render the XML scene itself", str(scene.path))
     if scene.environment is not None and scene.environment.kind != "constant":
@@ -188,6 +189,8 @@ def _material(scene: Scene, row: int) -> list[str]:
         out.append(f"{p.name} = {_value(value)}")
     if not table.twosided[row]:
         out.append("twosided = false")
+    if table.opacity[row] < 1.0:
+        out.append(f"opacity = {_value(float(table.opacity[row]))}")
     return out + [""]
 
 

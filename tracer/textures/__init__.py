@@ -105,6 +105,8 @@ class Textures(NamedTuple):
     bindings : (B, 5) float64 rows (column, size, texture, lo, hi), grouped by material.
     first_binding : (K + 1,) int64: material k's bindings are rows first_binding[k] ..
         first_binding[k + 1] - 1.
+    opacity : (K,) int64 per material row, the texture that gives its opacity
+        (``MaterialTable.opacity``), -1 where it is a constant.
     corner_uv : (F, 6) float64 (u, v) at each triangle's three corners, or (0, 6).
     sphere_frame : (S, 9) float64 rows of each analytic sphere's world-to-local rotation, for
         Mitsuba's spherical (u, v), or (0, 9).
@@ -114,23 +116,40 @@ class Textures(NamedTuple):
     pixels: np.ndarray
     bindings: np.ndarray
     first_binding: np.ndarray
+    opacity: np.ndarray
     corner_uv: np.ndarray
     sphere_frame: np.ndarray
 
 
 @dataclass
 class TextureTable:
-    """A scene's textures and what they feed."""
+    """A scene's textures and what they feed: material parameters (``bindings``) and the
+    opacity of material rows (``cutouts``: row -> texture index)."""
 
     textures: list[Texture] = field(default_factory=list)
     bindings: list[Binding] = field(default_factory=list)
+    cutouts: dict[int, int] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
-        return bool(self.bindings)
+        """Whether anything is textured (then the scene keeps its texture coordinates)."""
+        return bool(self.bindings or self.cutouts)
 
     def add(self, texture: Texture) -> int:
-        self.textures.append(texture)
-        return len(self.textures) - 1
+        """The index of ``texture`` in the table, added unless it is there (the same object)."""
+        index = next((i for i, t in enumerate(self.textures) if t is texture), None)
+        if index is None:
+            self.textures.append(texture)
+            index = len(self.textures) - 1
+        return index
+
+    def bind_opacity(self, row: int, opacity: "Texture | float") -> float:
+        """Material ``row``'s opacity (Mitsuba's ``mask``): a number in [0, 1], returned as it
+        is, or a texture, bound to the row here and returned as its mean (clamped into [0, 1]:
+        lookups are clamped, as Mitsuba clamps them)."""
+        if not isinstance(opacity, Texture):
+            return float(opacity)
+        self.cutouts[row] = self.add(opacity)
+        return float(np.clip(opacity.mean(1)[0], 0.0, 1.0))
 
     def arrays(self, material_count: int, corner_uv: np.ndarray, sphere_frame: np.ndarray) -> Textures:
         """The kernels' arrays (``Textures``) for a table of ``material_count`` materials."""
@@ -153,7 +172,11 @@ class TextureTable:
         counts = np.bincount([b.material for b in ordered], minlength=material_count)
         first = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         pixels = np.concatenate(pools) if pools else np.zeros(0, dtype=np.float32)
-        return Textures(info, pixels, bindings, first, np.ascontiguousarray(corner_uv, dtype=np.float64),
+        opacity = np.full(material_count, -1, dtype=np.int64)
+        for row, texture in self.cutouts.items():
+            opacity[row] = texture
+        return Textures(info, pixels, bindings, first, opacity,
+                        np.ascontiguousarray(corner_uv, dtype=np.float64),
                         np.ascontiguousarray(sphere_frame, dtype=np.float64))
 
     def digest(self) -> bytes:
@@ -169,6 +192,8 @@ class TextureTable:
                 h.update(np.ascontiguousarray(t.pixels, dtype="<f4").tobytes())
         for b in self.bindings:
             h.update(f"{b.material} {b.param} {b.column} {b.size} {b.texture} {b.lo!r} {b.hi!r}\0".encode())
+        for row, texture in sorted(self.cutouts.items()):  # none in scenes digested before masks
+            h.update(f"opacity {row} {texture}\0".encode())
         return h.digest()
 
 
@@ -191,9 +216,7 @@ def bind(table: TextureTable, row: int, kind, values: dict[str, object], where: 
         if (low < lo or high > hi) and notes is not None:
             notes.append(f"{texture.source or where}: the texture's values ({low:.4g} .. {high:.4g}) are "
                          f"clamped into {param.name}'s range ({lo:g} .. {hi:g})")
-        index = next((i for i, t in enumerate(table.textures) if t is texture), None)
-        if index is None:
-            index = table.add(texture)
+        index = table.add(texture)
         table.bindings.append(Binding(row, param.name, kind.column(param.name), param.size, index, lo, hi))
         mean = np.clip(texture.mean(param.size), lo, hi)
         out[param.name] = float(mean[0]) if param.size == 1 else mean
