@@ -327,3 +327,73 @@ def test_toml_emitter_with_opacity_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"tracer: error: {path}: shape 3 emits, and its material 'pane' has an opacity (a mask): "
                    "tracer's emitters are opaque"], err
+
+
+# A sun (directional light) above a leaf plane of opacity 0.5, above the floor; optionally an
+# opaque roof between the leaves and the floor.
+SUN = HEADER + """
+[materials.leaves]
+type = "diffuse"
+reflectance = [0.0, 0.0, 0.0]
+opacity = 0.5
+
+[[shapes]]
+type = "quad"
+origin = [-2.0, 0.0, -2.0]
+edge1 = [0.0, 0.0, 4.0]
+edge2 = [4.0, 0.0, 0.0]
+material = "floor"
+
+[[shapes]]
+type = "quad"
+origin = [-9.0, 2.0, -9.0]
+edge1 = [0.0, 0.0, 18.0]
+edge2 = [18.0, 0.0, 0.0]
+material = "leaves"
+
+{roof}
+
+[[lights]]
+type = "directional"
+direction = [0.0, -1.0, 0.0]
+irradiance = [1.0, 2.0, 3.0]
+"""
+
+ROOF = """[[shapes]]
+type = "quad"
+origin = [-9.0, 1.0, -9.0]
+edge1 = [0.0, 0.0, 18.0]
+edge2 = [18.0, 0.0, 0.0]
+material = "black"
+"""
+
+
+def test_light_from_infinity_through_a_cutout_and_an_occluder(tmp_path):
+    """A directional light's shadow rays run to infinity: through the leaves (opacity 0.5) they
+    carry half the light, exactly, and an opaque roof below the leaves still blocks all of it
+    (a ray to infinity has no end to re-aim at: it keeps its direction past each cutout)."""
+    origins, dirs = floor_rays(400)
+    light = Strategy("light")
+    leaves = DirectLighting(load(tmp_path, SUN.format(roof=""), "a.toml"), light).radiance(origins, dirs)
+    roofed = DirectLighting(load(tmp_path, SUN.format(roof=ROOF), "b.toml"), light).radiance(origins, dirs)
+    clear = DirectLighting(load(tmp_path, SUN.format(roof="").replace("opacity = 0.5", "opacity = 0.0"),
+                                "c.toml"), light).radiance(origins, dirs)
+    assert np.all(clear > 0)
+    np.testing.assert_allclose(leaves, 0.5 * clear, rtol=1e-12, atol=0)
+    assert not np.any(roofed)
+
+
+@pytest.mark.parametrize("bsdf", [
+    '<bsdf type="twosided"><bsdf type="mask"><float name="opacity" value="0.3"/>'
+    '<bsdf type="diffuse"/></bsdf></bsdf>',
+    '<bsdf type="mask"><float name="opacity" value="0.3"/>'
+    '<bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>',
+])
+def test_a_mask_and_a_twosided_nest_either_way(tmp_path, bsdf):
+    """A twosided around a mask and a mask around a twosided (both of which Mitsuba takes) give one
+    two-sided row with the mask's opacity, and no row for the BSDFs inside."""
+    path = tmp_path / "scene.xml"
+    path.write_text(MASKED_XML.format(inside=bsdf))
+    table = tracer.load_scene(str(path)).materials
+    assert len(table.kind) == 2  # the black material, and the mask's row
+    assert table.opacity[1] == pytest.approx(0.3) and table.twosided[1]

@@ -25,6 +25,8 @@ cutouts runs none of this. An emitter cannot be a cutout (the readers refuse one
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..frame import dot, normalized, sub
@@ -101,15 +103,16 @@ def through_shadow(rows, prim, origins, dirs, ends, value, v2, blocked, hit_tabl
                    eps: float, opacity, textures, passing) -> int:
     """One layer of the shadow rays ``rows`` that something blocks: ``prim[k]`` is what row
     ``rows[k]``'s ray ``origins[k], dirs[k]`` hits first, and ``ends[k]`` is where its segment
-    ends (the original ray's end, just short of the light point). A hit beyond the end, or none,
-    unblocks the row; an opaque hit, or a cutout of opacity 1, blocks it; a cutout of opacity
-    a < 1 multiplies the row's ``value`` by 1 - a (and the mean square of its value ``v2``,
-    which adaptive allocation learns from, by (1 - a)²; the terms of optimal MIS's C stay: a
-    sample that carries any light is in C's support, ``tracer.tuning``) and starts the rest of
-    the segment just beyond it: ``origins[k]`` and ``dirs[k]`` are set to the segment from there
-    to the same end (re-aimed, since the offset moves the start off the line: kept on it, the
-    end would move by the offset over the cosine and could reach the light). Writes the
-    positions k of the rows still to follow into ``passing`` and returns their count."""
+    ends (the original ray's end, just short of the light point; not finite for a light at
+    infinity, whose ray has no end). A hit beyond the end, or none, unblocks the row; an opaque
+    hit, or a cutout of opacity 1, blocks it; a cutout of opacity a < 1 multiplies the row's
+    ``value`` by 1 - a (and the mean square of its value ``v2``, which adaptive allocation
+    learns from, by (1 - a)²; the terms of optimal MIS's C stay: a sample that carries any light
+    is in C's support, ``tracer.tuning``) and starts the rest of the segment just beyond it:
+    ``origins[k]`` and ``dirs[k]`` are set to the segment from there to the same end (re-aimed,
+    since the offset moves the start off the line: kept on it, the end would move by the offset
+    over the cosine and could reach the light; a ray to infinity keeps its direction). Writes
+    the positions k of the rows still to follow into ``passing`` and returns their count."""
     count = 0
     for k in range(len(rows)):
         row = rows[k]
@@ -120,8 +123,9 @@ def through_shadow(rows, prim, origins, dirs, ends, value, v2, blocked, hit_tabl
         o = (float(origins[k, 0]), float(origins[k, 1]), float(origins[k, 2]))
         d = (float(dirs[k, 0]), float(dirs[k, 1]), float(dirs[k, 2]))
         end = (ends[k, 0], ends[k, 1], ends[k, 2])
+        bounded = math.isfinite(end[0] + end[1] + end[2])
         x, face_normal, _ = surface_point(hit_table, first_sphere, p, o, d)
-        if dot(sub(x, o), d) >= dot(sub(end, o), d):
+        if bounded and dot(sub(x, o), d) >= dot(sub(end, o), d):
             continue  # the first thing on the line lies beyond the segment's end
         a = opacity_at(hit_table, first_sphere, opacity, textures, p, x) \
             if _is_cutout(hit_table, opacity, textures, p) else 1.0
@@ -132,7 +136,11 @@ def through_shadow(rows, prim, origins, dirs, ends, value, v2, blocked, hit_tabl
             value[row, c] *= 1.0 - a
         v2[row] *= (1.0 - a) * (1.0 - a)
         beyond = offset_origin(x, eps, face_normal, d)
-        rest, _ = normalized(sub(end, beyond))
+        rest = d
+        if bounded:
+            if dot(sub(end, beyond), d) <= 0.0:
+                continue  # the cutout lies at the end itself: nothing more between
+            rest, _ = normalized(sub(end, beyond))
         for c in range(3):
             origins[k, c] = beyond[c]
             dirs[k, c] = rest[c]
@@ -222,7 +230,10 @@ class Cutouts:
         rows = np.flatnonzero(blocked).astype(np.int64)
         here = np.ascontiguousarray(origins[rows], dtype=np.float32)
         toward = np.ascontiguousarray(dirs[rows], dtype=np.float32)
-        ends = here + np.asarray(tmax[rows], dtype=np.float64)[:, None] * toward
+        # Where each segment ends; a light at infinity's (tmax inf) has no end: inf, or NaN
+        # where a component of its direction is 0, both read as "not finite" by the kernel.
+        with np.errstate(invalid="ignore"):
+            ends = here + np.asarray(tmax[rows], dtype=np.float64)[:, None] * toward
         passing = np.empty(len(rows), dtype=np.int64)
         for _ in range(MAX_LAYERS):
             if not len(rows):

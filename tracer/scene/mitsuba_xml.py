@@ -788,57 +788,59 @@ class _SceneReader:
             work.extend(("enter", inner, naming) for inner, naming in reversed(nested))
 
     def material(self, bsdf: Element, written: Element) -> int:
-        if bsdf.attrs.get("type") == "mask":
-            return self.masked_material(bsdf)
-        twosided = bsdf.attrs.get("type") == "twosided"
-        key = (id(bsdf), twosided)
+        """The material row of the BSDF ``bsdf`` (one row per element, and per wrapping
+        ``twosided``; ``written``: where the shape names it)."""
+        key = (id(bsdf), bsdf.attrs.get("type") == "twosided")
         if key in self.rows:
             return self.rows[key]
+        ident, inner, type_name, values, twosided, opacity = self.material_parts(bsdf)
+        name = self.unique(ident or f"{inner.type}@{Path(inner.element.file).name}:{inner.element.line}")
+        row = self.rows[key] = self.add_material(name, type_name, values, twosided)
+        if opacity is not None:
+            self.opacities[row] = opacity
+        return row
+
+    def material_parts(self, bsdf: Element, sides: bool = False) -> tuple:
+        """``(id, inner plugin, type name, values, twosided, opacity)`` of the BSDF ``bsdf``:
+        the first id on the way in, the innermost BSDF that tracer's type reads, its type and
+        values, whether it reflects on both sides, and a ``mask``'s opacity (a number or a
+        texture; Mitsuba's default 0.5) or None. ``sides``: a ``twosided`` wraps it.
+
+        A ``mask`` becomes its nested BSDF's material with the mask's opacity
+        (``MaterialTable.opacity``, ``tracer.estimator.cutouts``); a ``twosided`` may wrap a mask
+        (Mitsuba nests it there: its pass-through is not a transmission lobe) and a mask a
+        ``twosided``. Mitsuba's dielectrics shade both sides (an inside seen from behind: eta
+        inverted)."""
         p = self.plugin(bsdf)
-        inner = p
-        if twosided:
+        ident = bsdf.attrs.get("id")
+        if p.type == "mask":
+            opacity = self.mask_opacity(p)
+            nested = p.nested("bsdf")
+            if len(nested) != 1:
+                p.fail(f"mask needs one nested bsdf, not {len(nested)}")
+            inner, naming = nested[0]
+            if inner.attrs.get("type") == "mask":
+                naming.fail("a mask inside a mask is not supported (give one mask the product of the "
+                            "opacities)", bsdf)
+            p.done()
+            inner_id, plugin, type_name, values, twosided, _ = self.material_parts(inner, sides)
+            return ident or inner_id, plugin, type_name, values, twosided, opacity
+        if p.type == "twosided":
             nested = p.nested("bsdf")
             if not nested:
                 p.fail("twosided needs one nested bsdf")
             if len(nested) > 1:
                 nested[1][1].fail("two different BSDFs for the two sides are not supported (tracer's "
                                   "twosided material is one BSDF on both sides)", bsdf)
-            inner = self.plugin(nested[0][0])
-            if inner.type == "twosided":
+            if sides:
+                p.fail("a twosided inside a twosided")
+            if nested[0][0].attrs.get("type") == "twosided":
                 nested[0][1].fail("a twosided inside a twosided", bsdf)
             p.done()
-        type_name, values = self.bsdf_triple(inner)
-        ident = bsdf.attrs.get("id") or inner.element.attrs.get("id")
-        name = self.unique(ident or f"{inner.type}@{Path(inner.element.file).name}:{inner.element.line}")
-        # Mitsuba's dielectrics shade both sides (an inside seen from behind: eta inverted).
-        row = self.add_material(name, type_name, values, twosided or type_name in _DIELECTRICS)
-        self.rows[key] = row
-        return row
-
-    def masked_material(self, bsdf: Element) -> int:
-        """The row of Mitsuba's ``mask``: its nested BSDF's material in a row of its own, whose
-        opacity (a number or a texture; default 0.5, as Mitsuba's) is the mask's
-        (``MaterialTable.opacity``, ``tracer.estimator.cutouts``)."""
-        key = (id(bsdf), False)
-        if key in self.rows:
-            return self.rows[key]
-        p = self.plugin(bsdf)
-        opacity = self.mask_opacity(p)
-        nested = p.nested("bsdf")
-        if len(nested) != 1:
-            p.fail(f"mask needs one nested bsdf, not {len(nested)}")
-        inner, naming = nested[0]
-        if inner.attrs.get("type") == "mask":
-            naming.fail("a mask inside a mask is not supported (give one mask the product of the "
-                        "opacities)", bsdf)
-        p.done()
-        inner_row = self.material(inner, naming)
-        name, type_name, values = self.triples[inner_row - 1]
-        row = self.add_material(self.unique(bsdf.attrs.get("id") or f"mask of {name}"), type_name, values,
-                                self.sides[inner_row - 1])
-        self.opacities[row] = opacity
-        self.rows[key] = row
-        return row
+            inner_id, plugin, type_name, values, _, opacity = self.material_parts(nested[0][0], True)
+            return ident or inner_id, plugin, type_name, values, True, opacity
+        type_name, values = self.bsdf_triple(p)
+        return ident, p, type_name, values, sides or type_name in _DIELECTRICS, None
 
     def mask_opacity(self, p: _Plugin) -> object:
         """A ``mask``'s opacity: a texture, or a number in [0, 1] (a colour's luminance, as
