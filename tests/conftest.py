@@ -8,7 +8,13 @@ from pathlib import Path
 
 import pytest
 
-import tracer
+# Before tracer is imported, which reads it: the suite's kernels are compiled with numba's
+# inlining off (``tracer.jit.INLINE``): the same bits in a third less compile time, over the
+# dozens of builds the suite compiles; tests/test_jit_cache.py checks the bits against a child
+# process that compiles with the default.
+os.environ.setdefault("TRACER_INLINE", "never")
+
+import tracer  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "tracer" / "scenes"

@@ -91,6 +91,7 @@ def _env(root: Path, **extra: str) -> dict:
     # No .pyc files: the edit below keeps a.py's size, and CPython's .pyc check (whole-second
     # mtime and size) could otherwise serve the old bytecode within the same second.
     env["PYTHONDONTWRITEBYTECODE"] = "1"
+    env["TRACER_INLINE"] = "always"  # the probes test inlined code (the suite's default is never)
     env.update(extra)
     return env
 
@@ -271,3 +272,25 @@ def test_damaged_data_is_a_cache_miss(tmp_path, damage):
     else:
         data.write_bytes(hashlib.sha256(b"garbage").digest() * 64)
     _assert_recovers(tmp_path)
+
+
+def test_inlining_changes_no_bit_of_a_render(tmp_path):
+    """The suite compiles with numba's inlining off (tests/conftest.py, ``tracer.jit.INLINE``),
+    users' renders with it on: a render of the shipped Cornell box with each, in fresh
+    processes with their own cache folders, gives the same bits in every pixel (IEEE semantics
+    either way: inlining moves code, it does not reorder arithmetic)."""
+    import numpy as np
+
+    scene = Path(tracer.__file__).parent / "scenes" / "cornell.toml"
+    images = []
+    for mode in ("always", "never"):
+        out = tmp_path / f"{mode}.exr"
+        env = {**os.environ, "TRACER_INLINE": mode, "TRACER_KERNELS": "scene",
+               "NUMBA_CACHE_DIR": str(tmp_path / f"cache-{mode}")}
+        done = subprocess.run([sys.executable, "-m", "tracer", "render", str(scene), "--strategy", "light",
+                               "--spp", "4", "--width", "24", "--height", "24", "--quiet", "-o", str(out)],
+                              env=env, capture_output=True, text=True, timeout=900)
+        assert done.returncode == 0, done.stderr
+        images.append(tracer.read_image(out))
+    assert np.array_equal(images[0].mean, images[1].mean)
+    assert np.array_equal(images[0].variance, images[1].variance, equal_nan=True)

@@ -588,13 +588,19 @@ def _completed(tracker) -> Iterator[tuple[Any, Any]]:
         item = next(tracker)
         future, result = item if tracker.with_results else (item, None)
         if future.status != "finished":
+            # Not finished when as_completed handed it over: it failed, or the worker holding its
+            # result died after finishing it and Dask is computing it again (``lost``, then
+            # ``pending``). result() waits for the rerun: a task finished again is a finished task.
             try:
-                future.result()
+                value = future.result()
             except (distributed.KilledWorker, distributed.CancelledError, distributed.comm.CommClosedError,
                     OSError) as exc:
                 raise ClusterLost(f"the Dask cluster lost task {future.key}: {type(exc).__name__}: "
                                   f"{exc}") from None
-            raise ClusterLost(f"Dask task {future.key} ended as {future.status}")
+            if future.status != "finished":
+                raise ClusterLost(f"Dask task {future.key} ended as {future.status}")
+            if tracker.with_results:
+                result = value
         yield future, result
 
 
