@@ -547,6 +547,64 @@ def test_disk_is_a_fan_within_a_ten_thousandth_of_its_area(tmp_path):
     assert np.allclose(scene.vertices[:, 2], 1.0)
 
 
+@pytest.mark.parametrize("flip", [False, True])
+def test_cylinder_is_a_tube_of_quads_facing_out_with_radial_normals(tmp_path, flip):
+    """Mitsuba's cylinder: radius 0.5 from p0 to p1 (here along x, then moved by to_world) as
+    CYLINDER_SEGMENTS quads whose corners lie on the tube, whose faces and vertex normals point
+    away from the axis (toward it with flip_normals); its area within 1e-4 of 2π r L; its
+    corners' (u, v) are (φ / 2π, z) in the tube's frame, Mitsuba's to_frame of the axis (s, t,
+    n = x here), the seam's corners at u = 1 on the quads that end there."""
+    from tracer.scene.mitsuba_xml import CYLINDER_SEGMENTS, _axis_frame
+
+    extra = '<boolean name="flip_normals" value="true"/>' if flip else ""
+    scene = load(tmp_path, '<shape type="cylinder"><float name="radius" value="0.5"/>'
+                           '<point name="p0" value="0, 0, 0"/><point name="p1" value="2, 0, 0"/>'
+                           f'<transform name="to_world"><translate y="1"/></transform>{extra}'
+                           '<bsdf type="diffuse"><texture name="reflectance" type="checkerboard"/></bsdf>'
+                           '</shape>')
+    assert len(scene.faces) == 2 * CYLINDER_SEGMENTS
+    corners = scene.vertices[scene.faces].reshape(-1, 3) - [0.0, 1.0, 0.0]
+    uv = scene.corner_uv.reshape(-1, 2)
+    s_axis, t_axis, _ = _axis_frame(np.array([1.0, 0.0, 0.0])).T
+    phi = np.arctan2(corners @ t_axis, corners @ s_axis) % (2 * math.pi)
+    np.testing.assert_allclose(uv[:, 1], corners[:, 0] / 2.0, atol=1e-6)
+    seam = np.isclose(uv[:, 0], 1.0)
+    np.testing.assert_allclose(uv[~seam, 0], phi[~seam] / (2 * math.pi), atol=1e-6)
+    assert np.all(phi[seam] < 1e-6) or np.all(phi[seam] > 2 * math.pi - 1e-6)
+    radial = scene.vertices - [0.0, 1.0, 0.0]
+    radial[:, 0] = 0.0
+    np.testing.assert_allclose(np.linalg.norm(radial, axis=1), 0.5, rtol=1e-6)
+    assert np.allclose(scene.vertices[:, 0].min(), 0.0) and np.allclose(scene.vertices[:, 0].max(), 2.0)
+    centre = scene.v0 + (scene.edge1 + scene.edge2) / 3.0
+    outward = centre - [0.0, 1.0, 0.0]
+    outward[:, 0] = 0.0
+    sign = -1.0 if flip else 1.0
+    assert np.all(sign * np.einsum("ij,ij->i", scene.normal, outward) > 0.0)
+    corner_normals = scene.corner_normals.reshape(-1, 3, 3)
+    corner_radial = (scene.vertices[scene.faces] - [0.0, 1.0, 0.0]) * [0.0, 2.0, 2.0]
+    np.testing.assert_allclose(corner_normals, sign * corner_radial, atol=1e-6)
+    assert abs(scene.area.sum() / (2 * math.pi * 0.5 * 2.0) - 1.0) < 1e-4
+
+
+def test_instances_copy_their_group_under_their_transform(tmp_path):
+    """Each instance adds its shapegroup's shapes under the instance's to_world after each
+    shape's own (Mitsuba's instance): a cube and a sphere, twice; the group alone adds nothing."""
+    group = ('<shape type="shapegroup" id="g"><shape type="cube"><transform name="to_world">'
+             '<translate x="1"/></transform></shape><shape type="sphere"><float name="radius" value="0.5"/>'
+             '</shape></shape>')
+    alone = load(tmp_path, group + f'<shape type="rectangle">{EMIT}</shape>')
+    assert len(alone.shapes) == 1
+    scene = load(tmp_path, group + '<shape type="instance"><ref id="g"/></shape>'
+                 '<shape type="instance"><ref id="g"/><transform name="to_world"><scale value="2"/>'
+                 f'<translate z="5"/></transform></shape><shape type="rectangle">{EMIT}</shape>')
+    assert [s.type for s in scene.shapes] == ["mesh", "sphere", "mesh", "sphere", "quad"]
+    first, second = (scene.vertices[scene.faces[s.first:s.first + s.count]].reshape(-1, 3)
+                     for s in (scene.shapes[0], scene.shapes[2]))
+    np.testing.assert_allclose(second, 2.0 * first + [0.0, 0.0, 5.0], atol=1e-5)
+    np.testing.assert_allclose(scene.spheres, [[0, 0, 0, 0.5], [0, 0, 5, 1.0]])
+    assert scene.material[scene.shapes[0].first] == scene.material[scene.shapes[2].first]
+
+
 def test_sphere_center_radius_and_to_world(tmp_path):
     """Mitsuba's sphere is to_world x translate(center) x scale(radius): center (1, 0, 0),
     radius 2 under scale 3 is centre (3, 0, 0), radius 6 (mi.traverse: to_world [[6, 0, 0, 3],
@@ -698,9 +756,11 @@ def test_quads_and_polygons_are_fans_as_mitsubas_obj_loader_makes_them(tmp_path)
 
 @pytest.mark.parametrize("shape, words", [
     ('<shape type="serialized"/>', ["serialized", "missing property 'filename'"]),
-    ('<shape type="instance"/>', ["instance", "instancing"]),
-    ('<shape type="shapegroup"/>', ["shapegroup"]),
-    ('<shape type="cylinder"/>', ["cylinder"]),
+    ('<shape type="instance"/>', ["instance", "needs one reference to a shapegroup"]),
+    ('<shape type="shapegroup"><shape type="instance"/></shape>', ["nested instancing"]),
+    (f'<shape type="shapegroup" id="g"><shape type="cube">{EMIT}</shape></shape>'
+     '<shape type="instance"><ref id="g"/></shape>', ["an emitter in a shapegroup"]),
+    ('<shape type="linearcurve"/>', ["linearcurve"]),
     ('<shape type="obj"/>', ["filename"]),
     ('<shape type="obj"><string name="filename" value="missing.obj"/></shape>', ["mesh file not found"]),
     (f'<shape type="ply"><string name="filename" value="{TENT}"/><float name="maximum" value="1"/></shape>',

@@ -59,6 +59,8 @@ MIN_ALPHA = 1e-4  # Mitsuba's microfacet distributions clamp alpha to at least t
 # A disk is a fan of this many triangles: its area is (N/2) sin(2 pi/N) r^2, within 8e-5 of
 # pi r^2 (the issue asks for 0.01%).
 DISK_SEGMENTS = 288
+# A cylinder is a tube of this many quads: each facet within 1 - cos(pi/N) = 6e-5 of the radius.
+CYLINDER_SEGMENTS = 288
 # A camera transform whose linear part M has an entry of M M^T - I beyond this scales or shears:
 # Mitsuba 3.9.1's own test (Transform::has_scale in include/mitsuba/core/transform.h, which the
 # perspective sensor's constructor applies, src/sensors/perspective.cpp), so tracer refuses what
@@ -274,6 +276,7 @@ class _SceneReader:
         self.render: dict[str, Any] = {}
         self.default_row: int | None = None
         self.textures_read: dict[int, Texture] = {}  # by the id of the texture's element
+        self.groups: dict[int, list[Element]] = {}  # a shapegroup's shapes, by its element's id
         self.images: dict[tuple[str, bool], np.ndarray] = {}  # texels by (file, raw)
         self.environment: Environment | None = None
         self.environment_element: Element | None = None
@@ -469,15 +472,27 @@ class _SceneReader:
 
     # -- shapes ----------------------------------------------------------------------------
 
-    def shape(self, element: Element) -> None:
+    def shape(self, element: Element, parent: np.ndarray | None = None) -> None:
+        """Read the shape ``element`` into the geometry; ``parent``: the to_world of the instance
+        it is read for (a shape of a ``shapegroup``), applied after its own."""
         p = self.plugin(element)
         kind = p.type
-        if kind not in ("obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk"):
-            hints = {"instance": " (instancing)", "shapegroup": " (instancing)"}
-            p.fail(f"shape '{shown(kind)}' is not supported{hints.get(kind, '')}; tracer reads obj, ply, "
-                   "serialized, rectangle, cube, sphere and disk")
+        if kind == "shapegroup":
+            self.shape_group(p)
+            return
+        if kind == "instance":
+            self.instance(p)
+            return
+        if kind not in ("obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk", "cylinder"):
+            p.fail(f"shape '{shown(kind)}' is not supported; tracer reads obj, ply, serialized, rectangle, "
+                   "cube, sphere, disk and cylinder, and instances of shapegroups of them")
         matrix = p.transform()
         matrix = np.eye(4) if matrix is None else matrix
+        if parent is not None:
+            matrix = parent @ matrix
+            if p.nested("emitter"):
+                p.fail("an emitter in a shapegroup (Mitsuba refuses it too: \"Instancing of emitters is not "
+                       "supported\")")
         if np.max(np.abs(matrix)) > MAX_COORDINATE:
             p.props["to_world"].fail(f"numbers beyond +-{MAX_COORDINATE:g}", element)
         linear = matrix[:3, :3]
@@ -494,6 +509,9 @@ class _SceneReader:
             return
         if kind in ("obj", "ply", "serialized"):
             self.mesh(p, matrix, flip, mirrored, material, emission)
+            return
+        if kind == "cylinder":
+            self.cylinder(p, matrix, flip, mirrored, material, emission, description)
             return
         if kind == "rectangle":
             # Mitsuba's rectangle faces its to_world normal transform of +z: along the cross
@@ -549,6 +567,69 @@ class _SceneReader:
         # Mitsuba's spherical (u, v) are taken in the sphere's own frame: to_world's rotation.
         frame = (linear / math.sqrt(scale2)).T
         self.geometry.add_sphere({"center": center, "radius": radius}, material, emission, frame)
+
+    def shape_group(self, p: _Plugin) -> list[Element]:
+        """The shapes of the ``shapegroup`` ``p`` (read once per instance, none on their own), as
+        Mitsuba checks them: no nested groups or instances."""
+        known = self.groups.get(id(p.element))
+        if known is not None:
+            return known
+        shapes = []
+        for shape, written in p.nested("shape"):
+            if shape.attrs.get("type") in ("shapegroup", "instance"):
+                written.fail("nested instancing is not supported (Mitsuba refuses it too)", p.element)
+            shapes.append(shape)
+        p.done()
+        self.groups[id(p.element)] = shapes
+        return shapes
+
+    def instance(self, p: _Plugin) -> None:
+        """Mitsuba's ``instance``: the shapes of its one ``shapegroup``, each under the instance's
+        ``to_world`` after its own, added to the scene as shapes of their own (the geometry is
+        copied: tracer has no instancing in its acceleration structure)."""
+        groups = p.nested("shape")
+        if len(groups) != 1 or groups[0][0].attrs.get("type") != "shapegroup":
+            p.fail("an instance needs one reference to a shapegroup")
+        matrix = p.transform()
+        matrix = np.eye(4) if matrix is None else matrix
+        p.done()
+        for shape in self.shape_group(self.plugin(groups[0][0])):
+            self.shape(shape, parent=matrix)
+
+    def cylinder(self, p: _Plugin, matrix: np.ndarray, flip: bool, mirrored: bool, material: int,
+                 emission: np.ndarray, description: str) -> None:
+        """Mitsuba's ``cylinder``: the open tube of ``radius`` (1) from ``p0`` (0, 0, 0) to ``p1``
+        (0, 0, 1), facing outward (inward with ``flip_normals``), as CYLINDER_SEGMENTS quads with
+        smooth (radial) normals and Mitsuba's (u, v) = (φ / 2π, z) in the tube's frame, which is
+        ``to_world`` times Mitsuba's ``to_frame`` of the axis (``_axis_frame``)."""
+        radius = p.float("radius", 1.0, lo=0.0, lo_open=True, hi=MAX_COORDINATE)
+        p0, p1 = p.point("p0", np.zeros(3)), p.point("p1", np.array([0.0, 0.0, 1.0]))
+        length = float(np.linalg.norm(p1 - p0))
+        if not length > 0.0:
+            p.fail("p0 and p1 are the same point: the cylinder has no length")
+        where = p.props.get("to_world") or p.element
+        if mirrored:
+            where.fail("a mirroring to_world turns Mitsuba's cylinder inside out: not supported (use "
+                       "flip_normals)", p.element)
+        frame = np.eye(4)
+        frame[:3, :3] = _axis_frame((p1 - p0) / length) @ np.diag([radius, radius, length])
+        frame[:3, 3] = p0
+        tube = matrix @ frame
+        across = tube[:3, :2]
+        gram = across.T @ across
+        if abs(gram[0, 1]) > 1e-6 * gram[0, 0] or abs(gram[0, 0] - gram[1, 1]) > 1e-6 * gram[0, 0]:
+            where.fail("the cylinder's cross-section is not a circle (to_world scales or shears it "
+                       "unevenly across its axis; Mitsuba warns of it too)", p.element)
+        local, faces, normals, corner_uv = _unit_tube()
+        vertices = _apply(tube, local)
+        _check_range(p, vertices)
+        world_normals = unit_rows(normals @ np.linalg.inv(tube[:3, :3]))  # the inverse transpose
+        if flip:
+            faces, world_normals = faces[:, ::-1], -world_normals
+            corner_uv = corner_uv.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 6)
+        p.done()
+        self.geometry.add("mesh", {"file": description}, vertices, faces, material, emission,
+                          normals=world_normals, corner_uv=corner_uv)
 
     def mesh(self, p: _Plugin, matrix: np.ndarray, flip: bool, mirrored: bool, material: int,
              emission: np.ndarray) -> None:
@@ -1178,6 +1259,38 @@ def _disk_uv(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
             out[f, 2 * k] = radius
             out[f, 2 * k + 1] = (angles[k] if radius > 0.5 else middle) / (2.0 * math.pi)
     return out
+
+
+def _axis_frame(n: np.ndarray) -> np.ndarray:
+    """(3, 3) columns (s, t, n): Mitsuba's ``Frame3f(n)`` (its ``coordinate_system``, Duff et al.
+    2017, "Building an orthonormal basis, revisited"), the frame its cylinder is built in."""
+    sign = math.copysign(1.0, float(n[2]))
+    a = -1.0 / (sign + n[2])
+    b = n[0] * n[1] * a
+    s = np.array([1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]])
+    t = np.array([b, sign + n[1] * n[1] * a, -n[1]])
+    return np.stack([s, t, n], axis=1)
+
+
+def _unit_tube() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The unit open tube (radius 1 about z, 0 <= z <= 1) as CYLINDER_SEGMENTS quads facing
+    outward: vertices, faces, unit radial vertex normals and (F, 6) corner (u, v) = (φ / 2π, z),
+    the seam's column duplicated at u = 1. A quad's flat facet lies within 1 - cos(π / N) of the
+    tube (6e-5 of the radius); its interpolated normal within about that of the radial one."""
+    n = CYLINDER_SEGMENTS
+    angle = 2.0 * np.pi * np.arange(n + 1) / n
+    ring = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    ring[n] = ring[0]  # the seam: the same point, u = 1
+    bottom = np.concatenate([ring, np.zeros((n + 1, 1))], axis=1)
+    top = np.concatenate([ring, np.ones((n + 1, 1))], axis=1)
+    vertices = np.concatenate([bottom, top])
+    normals = np.concatenate([bottom, bottom]) * [1.0, 1.0, 0.0]
+    i = np.arange(n)
+    faces = np.concatenate([np.stack([i, i + 1, n + 1 + i + 1], axis=1),
+                            np.stack([i, n + 1 + i + 1, n + 1 + i], axis=1)])
+    uv = np.concatenate([np.stack([angle / (2.0 * np.pi), np.zeros(n + 1)], axis=1),
+                         np.stack([angle / (2.0 * np.pi), np.ones(n + 1)], axis=1)])
+    return vertices, faces, normals, uv[faces].reshape(-1, 6)
 
 
 def _unit_disk() -> tuple[np.ndarray, np.ndarray]:
