@@ -53,9 +53,17 @@ def without_integrators(text: str) -> str:
     return "".join(kept) + text[start:]
 
 
+# What Mitsuba renders tracer's direct light with: `direct`, or for scenes with masks `volpath`
+# at max_depth 2 (Mitsuba's `direct` stops shadow rays at a mask; volpath passes masks without
+# counting a bounce and weighs shadow rays by their transmittance: docs/MITSUBA_XML.md, mask).
+INTEGRATORS = {"direct": '<integrator type="direct"/>',
+               "volpath": '<integrator type="volpath"><integer name="max_depth" value="2"/></integrator>'}
+INTEGRATOR = INTEGRATORS["direct"]
+
+
 def rewrite(text: str, size: int) -> str:
-    """A scene file's text with the direct integrator, a box filter and a film of longer side
-    ``size`` (films with numeric sizes; others are left as they are)."""
+    """A scene file's text with the integrator ``INTEGRATOR``, a box filter and a film of longer
+    side ``size`` (films with numeric sizes; others are left as they are)."""
     text = without_integrators(text)
     # Film sides that are parameters ($res): their numeric defaults scaled by one factor, so
     # that the longer side is ``size`` and the aspect ratio stays.
@@ -71,7 +79,7 @@ def rewrite(text: str, size: int) -> str:
             text = pattern.sub(lambda m, v=value: f"{m.group(1)}{max(1, round(v * scale))}{m.group(3)}",
                                text, count=1)
     if "<sensor" in text:
-        text = re.sub(r"(<scene\b[^>]*>)", r'\1\n<integrator type="direct"/>', text, count=1)
+        text = re.sub(r"(<scene\b[^>]*>)", lambda m: f"{m.group(1)}\n{INTEGRATOR}", text, count=1)
 
     def film(match: re.Match) -> str:
         body = RFILTER.sub("", match.group(2))
@@ -169,11 +177,15 @@ def main() -> int:
     p.add_argument("--compare", action="store_true")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--size", type=int, default=96)
+    p.add_argument("--integrator", choices=sorted(INTEGRATORS), default="direct",
+                   help="Mitsuba's integrator: direct, or volpath (max_depth 2) for scenes with masks")
     p.add_argument("--runs", type=int, default=16)
     p.add_argument("--mitsuba-spp", type=int, default=256)
     p.add_argument("--spp", type=int, default=1024)
     p.add_argument("--seed", type=int, default=15)
     args = p.parse_args()
+    global INTEGRATOR
+    INTEGRATOR = INTEGRATORS[args.integrator]
     args.out.mkdir(parents=True, exist_ok=True)
     if args.mitsuba:
         corpus = args.mitsuba.resolve()
