@@ -20,11 +20,6 @@ from tracer.estimator import DirectLighting
 from tracer.study.stability import CASE_DIR, Cell, cases, expectations, load_case, run_case, run_suite
 
 
-# The tests that read ``suite`` run in one xdist worker (``--dist loadgroup`` in pyproject.toml):
-# each worker would otherwise run the whole study for its own copy of the fixture (2 minutes).
-SUITE = pytest.mark.xdist_group("stability_suite")
-
-
 @pytest.fixture(scope="module")
 def suite(tmp_path_factory):
     out = tmp_path_factory.mktemp("stability")
@@ -44,14 +39,12 @@ def test_every_case_is_a_documented_scene_file():
     assert used == shipped
 
 
-@SUITE
 def test_everything_that_must_hold_holds(suite):
     """Finite everywhere, zero (not NaN) where blind, unbiased where testable, Veach's bound."""
     _, doc = suite
     assert expectations(doc) == []
 
 
-@SUITE
 def test_suite_covers_the_failure_cases_and_writes_its_files(suite):
     out, doc = suite
     names = set(doc["cases"])
@@ -95,7 +88,6 @@ def test_suite_covers_the_failure_cases_and_writes_its_files(suite):
         assert by[(case, "mis")] <= factor.get(case, 20) * best + 1e-9, case
 
 
-@SUITE
 def test_scaled_and_degenerate_cases_match_the_plain_one(suite):
     """The same light at 1e-3 and 1e3 scale, and with zero-area triangles in both meshes, gives
     the same relMSE and means (same random numbers, scale-aware ray offsets)."""
@@ -108,7 +100,6 @@ def test_scaled_and_degenerate_cases_match_the_plain_one(suite):
             np.testing.assert_allclose(b["mean"], a["mean"], rtol=1e-3)
 
 
-@SUITE
 def test_expectations_catch_what_would_be_wrong(suite):
     """The checks can fail: a NaN count, a blind strategy that is not zero, a biased mean and
     a Veach violation are each reported."""
