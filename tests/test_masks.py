@@ -37,6 +37,14 @@ type = "diffuse"
 reflectance = [0.0, 0.0, 0.0]
 """
 
+FLOOR = """[[shapes]]
+type = "quad"
+origin = [-2.0, 0.0, -2.0]
+edge1 = [0.0, 0.0, 4.0]
+edge2 = [4.0, 0.0, 0.0]
+material = "floor"
+"""
+
 # A floor at y = 0, a pane at y = 1 spanning it (the cutout under test, or a pane of opacity 0,
 # or none), an emitting quad at y = 2 facing down and a point light above: every light sample
 # and every direction ray from the floor toward a light crosses the pane once.
@@ -46,13 +54,7 @@ type = "diffuse"
 reflectance = [0.0, 0.0, 0.0]
 opacity = {opacity}
 
-[[shapes]]
-type = "quad"
-origin = [-2.0, 0.0, -2.0]
-edge1 = [0.0, 0.0, 4.0]
-edge2 = [4.0, 0.0, 0.0]
-material = "floor"
-
+""" + FLOOR + """
 {pane}
 
 [[shapes]]
@@ -124,7 +126,8 @@ def test_textured_opacity_is_looked_up_where_the_shadow_ray_crosses(tmp_path):
     with (u, v) where the segment from the floor point to the light meets the pane, a the
     checkerboard's one-number value there (Mitsuba's swapped colours: color0 where exactly one of
     the scaled coordinates' fractional parts is above 1/2). Lanes whose crossing lies within
-    1e-6 of a checker edge are left out (float32 geometry decides their side)."""
+    1e-6 of a checker edge are left out (float32 geometry decides their side); 1e-12 relative
+    allows the rounding of one product, as above."""
     pane_opacity = ('{ texture = "checkerboard", color0 = 0.25, color1 = 0.9, '
                     'to_uv = [[3.0, 0.0, 0.0], [0.0, 5.0, 0.0]] }')
     text = LIT_FLOOR.replace("""[[shapes]]
@@ -149,7 +152,7 @@ emission = [4.0, 3.0, 2.0]
     clear_of_edges = np.minimum.reduce([np.abs(fu - 0.5), np.abs(fv - 0.5), fu, fv, 1 - fu, 1 - fv]) > 1e-6
     assert clear_of_edges.sum() > 2900 and np.all(none[clear_of_edges].max(axis=1) > 0)
     np.testing.assert_allclose(masked[clear_of_edges], ((1.0 - opacity) * none.T).T[clear_of_edges],
-                               rtol=1e-9, atol=0)
+                               rtol=1e-12, atol=0)
     assert {0.25, 0.9} <= set(np.unique(opacity[clear_of_edges]))
 
 
@@ -337,13 +340,7 @@ type = "diffuse"
 reflectance = [0.0, 0.0, 0.0]
 opacity = 0.5
 
-[[shapes]]
-type = "quad"
-origin = [-2.0, 0.0, -2.0]
-edge1 = [0.0, 0.0, 4.0]
-edge2 = [4.0, 0.0, 0.0]
-material = "floor"
-
+""" + FLOOR + """
 [[shapes]]
 type = "quad"
 origin = [-9.0, 2.0, -9.0]
