@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
+import pickle
 import textwrap
 from pathlib import Path
 
@@ -30,6 +32,37 @@ SCENES = ROOT / "tracer" / "scenes"
 os.environ["TRACER_KERNELS"] = "shared"
 os.environ["PYTHONPATH"] = os.pathsep.join(
     [str(Path(tracer.__file__).resolve().parent.parent), *filter(None, [os.environ.get("PYTHONPATH")])])
+
+
+@pytest.fixture(scope="session")
+def computed_once(tmp_path_factory):
+    """computed_once(name, compute) -> compute(folder)'s value, computed once in a whole run.
+
+    Under ``-n 2`` each process runs a module's fixture for the tests it was given, so an
+    expensive study (the stability suite: about two minutes) ran twice. The processes share the
+    parent of their base temporary folders: the first to take ``name``'s lock computes in a folder
+    there and pickles the value; the other waits on the lock (not on a clock) and reads it. A
+    failed computation leaves no value, so the next process computes again and fails the same way.
+    """
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+
+    def once(name: str, compute):
+        folder = root / f"once-{name}"
+        folder.mkdir(exist_ok=True)
+        stored = folder / "value.pickle"
+        with open(folder / ".lock", "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if stored.exists():
+                return pickle.loads(stored.read_bytes())
+            value = compute(folder)
+            partial = folder / "value.pickle.partial"
+            partial.write_bytes(pickle.dumps(value))
+            partial.replace(stored)
+            return value
+
+    return once
 
 
 @pytest.fixture

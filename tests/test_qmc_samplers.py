@@ -262,16 +262,20 @@ CHANNEL = 0  # the channels are proportional (``lit_floor``): one carries all th
 
 
 @pytest.fixture(scope="module")
-def coverage():
+def coverage(computed_once):
     """Renders of ``lit_floor`` at 64 x 64: an independent reference (2048 spp, seed 100), an
     independent 64-spp pilot (seed 99) whose variances weight the pixels, and two 64-spp
     renders (two seeds) of each sampler."""
-    scene = load_scene(lit_floor(COVERAGE_SIZE, COVERAGE_SIZE))
-    reference = render_film(scene, "independent", REFERENCE_SPP, 100)
-    pilot = render_film(scene, "independent", COVERAGE_SPP, 99)
-    films = {name: [render_film(scene, name, COVERAGE_SPP, seed) for seed in seeds]
-             for name, seeds in COVERAGE_SEEDS.items()}
-    return reference, pilot, films
+
+    def compute(_folder):
+        scene = load_scene(lit_floor(COVERAGE_SIZE, COVERAGE_SIZE))
+        reference = render_film(scene, "independent", REFERENCE_SPP, 100)
+        pilot = render_film(scene, "independent", COVERAGE_SPP, 99)
+        films = {name: [render_film(scene, name, COVERAGE_SPP, seed) for seed in seeds]
+                 for name, seeds in COVERAGE_SEEDS.items()}
+        return reference, pilot, films
+
+    return computed_once("qmc-coverage", compute)
 
 
 def _against_reference(film, reference, pilot, variance_of_mean) -> tuple[float, float, float]:

@@ -66,12 +66,15 @@ def test_every_shipped_scene_is_covered():
 
 
 @pytest.fixture(scope="module")
-def mis_films():
-    films = {}
-    for name in AGREE:
-        scene = load_scene(SCENES / f"{name}.toml", SIZE, SIZE)
-        films[name] = render(scene, Strategy("mis"), RenderSettings(spp=AGREE[name][1], seed=1000)).film
-    return films
+def mis_films(computed_once):
+    def compute(_folder):
+        films = {}
+        for name in AGREE:
+            scene = load_scene(SCENES / f"{name}.toml", SIZE, SIZE)
+            films[name] = render(scene, Strategy("mis"), RenderSettings(spp=AGREE[name][1], seed=1000)).film
+        return films
+
+    return computed_once("mis-films", compute)
 
 
 @pytest.mark.parametrize("name", sorted(AGREE))

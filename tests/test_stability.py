@@ -21,9 +21,8 @@ from tracer.study.stability import CASE_DIR, Cell, cases, expectations, load_cas
 
 
 @pytest.fixture(scope="module")
-def suite(tmp_path_factory):
-    out = tmp_path_factory.mktemp("stability")
-    return out, run_suite(out, stream=None)
+def suite(computed_once):
+    return computed_once("stability", lambda out: (out, run_suite(out, stream=None)))
 
 
 def test_every_case_is_a_documented_scene_file():
