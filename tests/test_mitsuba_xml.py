@@ -1282,7 +1282,7 @@ def test_render_reference_compare_and_check_take_xml_scenes(tmp_path, capsys):
     assert cli.main(["render", str(bad), "-o", str(tmp_path / "x.exr")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f'tracer: error: {bad}:4: <bsdf type="hair" id="glass">: bsdf \'hair\' is not supported; '
-                   "tracer reads diffuse, conductor, roughconductor, plastic, roughplastic, dielectric, "
+                   "tracer reads diffuse, conductor, roughconductor, plastic, roughplastic, pplastic, dielectric, "
                    "roughdielectric, thindielectric, twosided and mask"]
 
 

@@ -17,6 +17,7 @@ roughplastic      6     ``roughplastic.py``: diffuse base under a rough coating
 dielectric        7     ``dielectric.py``: smooth glass, delta reflection and refraction
 thindielectric    8     ``thindielectric.py``: a thin pane, delta reflection and transmission
 roughdielectric   9     ``roughdielectric.py``: rough glass, microfacet reflection and refraction
+pplastic          10    ``pplastic.py``: rough specular plus Fresnel-attenuated diffuse (Mitsuba's)
 ================  ====  ==============================================================
 
 ``microfacet.py`` holds what the rough types share (distributions, visible-normal sampling,

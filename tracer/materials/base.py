@@ -190,6 +190,17 @@ def rgb(params, row: int, column: int):
     return params[row, column], params[row, column + 1], params[row, column + 2]
 
 
+@jit
+def weighted(wi, f, pdf: float, lobe: int):
+    """A ``sample`` result ``(wi, weight, pdf, lobe)`` for a direction drawn with density
+    ``pdf`` whose f is ``f``: weight = f cos(theta_i) / pdf; all zero where ``lobe`` is 0 (no
+    direction was drawn) or the pdf is not positive."""
+    if lobe == 0 or not pdf > 0.0:
+        return wi, (0.0, 0.0, 0.0), 0.0, 0
+    c = wi[2] / pdf
+    return wi, (f[0] * c, f[1] * c, f[2] * c), pdf, lobe
+
+
 @dataclass
 class MaterialTable:
     """The materials of a scene, one row each; row 0 is the black material (``NONE``) of

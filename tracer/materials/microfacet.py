@@ -30,6 +30,7 @@ import numpy as np
 
 from .. import warp
 from ..jit import jit, jit_called
+from .base import DIFFUSE, GLOSSY
 
 GGX, BECKMANN = 0, 1
 # The roughness a scene may give. Down to MIN_ALPHA every value, weight and pdf of both
@@ -294,6 +295,19 @@ def sample_reflection(wo, alpha: float, distribution: int, u0: float, u1: float)
     if not p > 0.0:
         return wi, 0.0, 0.0
     return wi, p, g1(wi[2], alpha, distribution)
+
+
+@jit
+def reflection_or_cosine(wo, alpha: float, distribution: int, p_reflection: float, u_lobe: float, u0: float,
+                         u1: float):
+    """``(wi, lobe)``: the direction of a two-lobe material (``roughplastic``, ``pplastic``),
+    which weights it by the pdf of its mixture. With probability ``p_reflection`` wi reflects
+    about a visible normal (lobe ``GLOSSY``), else it comes from the cosine warp (``DIFFUSE``);
+    lobe 0 where the reflection falls below the surface."""
+    if u_lobe < p_reflection:
+        wi, pdf_reflection, _ = sample_reflection(wo, alpha, distribution, u0, u1)
+        return wi, (GLOSSY if pdf_reflection > 0.0 else 0)
+    return warp.cosine_hemisphere(u0, u1), DIFFUSE
 
 
 # ---------------------------------------------------------------------------------------------

@@ -37,7 +37,7 @@ from .. import warp
 from ..jit import jit, jit_called
 from ..plugins import register
 from . import microfacet
-from .base import DIFFUSE, GLOSSY, MaterialType, Param, rgb
+from .base import DIFFUSE, GLOSSY, MaterialType, Param, rgb, weighted
 from .plastic import COATING_PARAMS, base_albedo, coating_constants, specular_probability
 
 CODE = 6  # the dispatch code (``tracer.materials``)
@@ -110,17 +110,7 @@ def sample(params, row, wo, u_lobe, u0, u1):
     if wo[2] <= 0.0:
         return (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0
     p_coating = specular_probability(1.0 - transmittance(params, row, wo[2]), params[row, SPECULAR_WEIGHT])
-    if u_lobe < p_coating:
-        distribution = int(params[row, DISTRIBUTION])
-        wi, pdf_coating, _ = microfacet.sample_reflection(wo, params[row, ALPHA], distribution, u0, u1)
-        if not pdf_coating > 0.0:
-            return wi, (0.0, 0.0, 0.0), 0.0, 0
-        flags = GLOSSY
-    else:
-        wi = warp.cosine_hemisphere(u0, u1)
-        flags = DIFFUSE
+    wi, flags = microfacet.reflection_or_cosine(wo, params[row, ALPHA], int(params[row, DISTRIBUTION]),
+                                                p_coating, u_lobe, u0, u1)
     f, p = eval_pdf(params, row, wo, wi)
-    if not p > 0.0:
-        return wi, (0.0, 0.0, 0.0), 0.0, 0
-    c = wi[2] / p
-    return wi, (f[0] * c, f[1] * c, f[2] * c), p, flags
+    return weighted(wi, f, p, flags)

@@ -72,8 +72,8 @@ CYLINDER_SEGMENTS = 288
 RIGID_TOLERANCE = 1e-3
 
 _REFLECTANCES = ("reflectance", "diffuse_reflectance", "specular_reflectance")
-_READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided",
-                         "dielectric", "thindielectric", "roughdielectric", "mask"})
+_READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "pplastic",
+                         "twosided", "dielectric", "thindielectric", "roughdielectric", "mask"})
 _DIELECTRICS = frozenset({"dielectric", "roughdielectric", "thindielectric"})
 # Mitsuba 3.9.1's BSDF plugins (src/bsdfs/*.cpp): an unused declaration of one that tracer does
 # not read is accepted unread (it changes no image); any other type is unknown to Mitsuba too.
@@ -1032,6 +1032,19 @@ class _SceneReader:
                 "nonlinear": p.boolean("nonlinear", False)}
             if kind == "roughplastic":
                 values.update(self.roughness(p))
+        elif kind == "pplastic":
+            values = {
+                "diffuse_reflectance": self.colour(p, "diffuse_reflectance", 0.5, "reflectance", hi=1.0),
+                "specular_reflectance": self.colour(p, "specular_reflectance", 1.0, "reflectance", hi=1.0)}
+            if p.has("eta"):
+                # Mitsuba's pplastic alone takes the relative index directly.
+                if p.has("int_ior") or p.has("ext_ior"):
+                    p.fail("give eta or int_ior and ext_ior, not both")
+                values.update(int_ior=self.ior(p, "eta", "polypropylene"), ext_ior=1.0)
+            else:
+                values.update(int_ior=self.ior(p, "int_ior", "polypropylene"),
+                              ext_ior=self.ior(p, "ext_ior", "air"))
+            values.update(self.roughness(p))
         elif kind in _DIELECTRICS:
             values = {
                 "specular_reflectance": p.color("specular_reflectance", 1.0, "reflectance", hi=1.0),
@@ -1046,7 +1059,8 @@ class _SceneReader:
                            "number)")
         else:
             p.fail(f"bsdf '{shown(kind)}' is not supported; tracer reads diffuse, conductor, roughconductor, "
-                   "plastic, roughplastic, dielectric, roughdielectric, thindielectric, twosided and mask")
+                   "plastic, roughplastic, pplastic, dielectric, roughdielectric, thindielectric, twosided "
+                   "and mask")
         p.done()
         return kind, values
 
