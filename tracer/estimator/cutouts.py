@@ -33,7 +33,7 @@ from ..frame import dot, normalized, sub
 from ..geometry import offset_origin, surface_point
 from ..jit import jit
 from ..samplers.independent import lane_key, stream_uniform
-from ..textures.lookup import evaluate_one, uv_at
+from ..textures.lookup import uv_at, value_at
 
 # Cutouts one ray may pass before it counts as stopped (see the module's docstring).
 MAX_LAYERS = 256
@@ -55,7 +55,7 @@ def opacity_at(hit_table, first_sphere: int, opacity, textures, p: int, x) -> fl
     if texture < 0:
         return opacity[row]
     u, v = uv_at(textures, hit_table, first_sphere, p, x)
-    return min(max(evaluate_one(textures, texture, u, v), 0.0), 1.0)
+    return min(max(value_at(textures, texture, True, hit_table, p, x, u, v)[0], 0.0), 1.0)
 
 
 @jit

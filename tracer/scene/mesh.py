@@ -16,7 +16,7 @@ from __future__ import annotations
 import io
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -44,12 +44,16 @@ class Mesh:
         or None if it has none.
     corner_uv : (F, 6) float64 texture coordinates (u, v) of each triangle's three corners as
         the file gives them, or None if it has none.
+    attributes : a PLY file's other vertex and face properties by Mitsuba's names
+        (``vertex_color``, ``face_weight``: :func:`ply_attributes`), each (F, 3, C) float64, its
+        value at each triangle's three corners (a face's value at all three), C = 1, 3 or 4.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     normals: np.ndarray | None = None
     corner_uv: np.ndarray | None = None
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def import_trimesh():
@@ -84,12 +88,17 @@ def read_mesh_file(mesh_path: Path) -> Mesh:
         # an overflow warning on stderr. The checks below refuse what it became, in one line.
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)
-            vertices, faces, normals, corner_uv = _load(trimesh, mesh_path)
+            vertices, faces, normals, corner_uv, attributes = _load(trimesh, mesh_path)
     except MeshError:
         raise
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise MeshError(f"cannot read mesh {mesh_path}: {exc}") from None
-    return checked(mesh_path, Mesh(vertices, faces, normals, corner_uv))
+    mesh = checked(mesh_path, Mesh(vertices, faces, normals, corner_uv))
+    for name, values in attributes.items():
+        if not np.all(np.isfinite(values)):
+            raise MeshError(f"{mesh_path} has a mesh attribute ({name}) that is not finite")
+    mesh.attributes = attributes
+    return mesh
 
 
 def checked(mesh_path: Path, mesh: Mesh) -> Mesh:
@@ -130,8 +139,9 @@ def checked(mesh_path: Path, mesh: Mesh) -> Mesh:
     return Mesh(vertices, faces, normals, corner_uv)
 
 
-def _load(trimesh, mesh_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """Vertices, faces, file normals (or None) and corner texture coordinates (or None).
+def _load(trimesh, mesh_path: Path) -> tuple:
+    """Vertices, faces, file normals (or None), corner texture coordinates (or None) and a PLY
+    file's attributes (``Mesh.attributes``; empty for other formats).
     trimesh's ``load_mesh`` drops the normals a
     file holds (its cache is reset after loading), so PLY and OBJ go through trimesh's
     format readers, whose output keeps them; other formats have none we read."""
@@ -150,14 +160,18 @@ def _load(trimesh, mesh_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray 
         if not isinstance(mesh, trimesh.Trimesh):
             raise MeshError(f"{mesh_path} holds no triangle mesh")
         return (np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), None,
-                None)
+                None, {})
     if not parts:
         raise MeshError(f"{mesh_path} holds no triangle mesh")
     vertices, faces, normals, corner_uv, offset = [], [], [], [], 0
+    attributes: dict[str, np.ndarray] = {}
     for part in parts:
         v = np.asarray(part.get("vertices", np.zeros((0, 3))), dtype=np.float64).reshape(-1, 3)
         f = np.asarray(part.get("faces", np.zeros((0, 3))), dtype=np.int64)
-        f = fan_triangles(f.reshape(-1, f.shape[-1] if f.ndim == 2 else 3))
+        f = f.reshape(-1, f.shape[-1] if f.ndim == 2 else 3)
+        if suffix == ".ply":  # one part
+            attributes = ply_attributes(part.get("metadata", {}).get("_ply_raw", {}), f, mesh_path)
+        f = fan_triangles(f)
         n = part.get("vertex_normals")
         uv = getattr(part.get("visual"), "uv", None)
         vertices.append(v)
@@ -172,7 +186,94 @@ def _load(trimesh, mesh_path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray 
         uv = _obj_corner_uv(text, vertices[faces], mesh_path)
     else:
         uv = None if any(c is None for c in corner_uv) else np.concatenate(corner_uv)
-    return vertices, faces, all_normals, uv
+    return vertices, faces, all_normals, uv, attributes
+
+
+# Mitsuba's PLY reader (src/shapes/ply.h, find_other_fields) keeps these as the vertex and face
+# themselves; every other property is an attribute.
+_PLY_RESERVED = {"vertex": {"x", "y", "z", "nx", "ny", "nz", "u", "v", "s", "t", "texture_u", "texture_v"},
+                 "face": {"vertex_indices", "vertex_index"}}
+# The postfix categories of a multi-field attribute: {prefix}_x, _y, _z, _w; _r, _g, _b, _a;
+# _0 .. _3; _1 .. _4 (Mitsuba's ``postfixes``; the colour category names it {prefix}_color).
+_POSTFIXES = ("xyzw", "rgba", "0123", "1234")
+
+
+def _ply_groups(names: list[str]) -> list[tuple[str, list[str]]]:
+    """``(attribute name without the element's prefix, its fields)`` of a PLY element's
+    property names, grouped as Mitsuba 3.9.1 groups them: r, g, b (and a) or red, green, blue
+    (and alpha) make ``color``; then consecutive ``{prefix}_{postfix}`` fields of one postfix
+    category, starting from its first letter, make ``{prefix}`` (``{prefix}_color`` for r, g,
+    b, a), kept only with 1 or 3 fields. Fields Mitsuba ignores (no one-letter postfix, a broken
+    sequence, a prefix seen before) are left out, as it leaves them out."""
+    groups: list[tuple[str, list[str]]] = []
+    present = set(names)
+    colour = next((c for c in (("r", "g", "b", "a"), ("red", "green", "blue", "alpha"))
+                   if set(c[:3]) <= present), None)
+    if colour is not None:
+        groups.append(("color", [c for c in colour if c in present]))
+    taken = set(colour or ())
+    seen: set[str] = set()
+    prefix, category, fields = None, -1, []
+
+    def flush() -> None:
+        if prefix is not None and len(fields) in (1, 3):
+            groups.append((prefix + ("_color" if category == 1 else ""), list(fields)))
+            seen.add(prefix)
+
+    for name in names:
+        if name in taken:
+            continue
+        head, _, postfix = name.rpartition("_")
+        if not head or len(postfix) != 1:
+            flush()
+            prefix, fields = None, []
+            continue
+        if prefix is not None and head == prefix and len(fields) < 4 and \
+                postfix == _POSTFIXES[category][len(fields)]:
+            fields.append(name)
+            continue
+        flush()
+        prefix, fields = None, []
+        starts = [i for i, letters in enumerate(_POSTFIXES) if letters[0] == postfix]
+        if head in seen or not starts:
+            continue
+        prefix, category, fields = head, starts[0], [name]
+    flush()
+    return groups
+
+
+def ply_attributes(raw: dict, faces: np.ndarray, mesh_path: Path) -> dict[str, np.ndarray]:
+    """A PLY file's attributes at the corners of its triangles (``Mesh.attributes``), from
+    trimesh's raw elements ``raw`` and the file's faces ``faces`` (F, k) before the fan
+    triangulation: ``vertex_NAME`` interpolated between corners, ``face_NAME`` constant on each
+    face (on each triangle of its fan). Values are taken as written (Mitsuba does not scale
+    integer colours into [0, 1] either)."""
+    out: dict[str, np.ndarray] = {}
+    triangles = fan_triangles(faces)
+    per_face = max(faces.shape[1] - 2, 1)
+    for element in ("vertex", "face"):
+        data = raw.get(element, {}).get("data")
+        # trimesh gives a binary file's element as a structured array, an ASCII file's as a
+        # dict of (N, 1) columns, both in the header's order.
+        if isinstance(data, dict):
+            columns = {n: np.asarray(c) for n, c in data.items()}
+        elif data is not None and data.dtype.names is not None:
+            columns = {n: data[n] for n in data.dtype.names if data.dtype[n].names is None}
+        else:
+            continue
+        names = [n for n, c in columns.items() if n not in _PLY_RESERVED[element]
+                 and c.ndim <= 2 and c.size == len(c) and c.dtype.kind in "fiu"]
+        for name, fields in _ply_groups(names):
+            values = np.stack([np.asarray(columns[f], dtype=np.float64).reshape(-1) for f in fields], axis=1)
+            if element == "vertex":
+                out[f"vertex_{name}"] = values[triangles]  # (F, 3 corners, C)
+            else:
+                if len(values) * per_face != len(triangles):
+                    raise MeshError(f"{mesh_path}: face attributes need faces of one size (its faces have "
+                                    "several)")
+                per_triangle = np.repeat(values, per_face, axis=0)
+                out[f"face_{name}"] = np.repeat(per_triangle[:, None, :], 3, axis=1)
+    return out
 
 
 def fan_triangles(faces: np.ndarray) -> np.ndarray:

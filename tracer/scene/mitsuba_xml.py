@@ -673,9 +673,12 @@ class _SceneReader:
                 corner_uv[:, 1::2] = 1.0 - corner_uv[:, 1::2]
             if flip != (mirrored and file_normals):  # the corners were turned with the winding
                 corner_uv = corner_uv.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 6)
+        attributes = mesh.attributes
+        if flip != (mirrored and file_normals):
+            attributes = {name: values[:, ::-1] for name, values in attributes.items()}
         p.done()
         self.geometry.add("mesh", {"file": str(path)}, vertices, faces, material, emission, normals,
-                          corner_uv)
+                          corner_uv, attributes)
 
     def shape_material(self, p: _Plugin) -> tuple[int, np.ndarray]:
         """The material row and emission of a shape, from its bsdf and emitter (nested or
@@ -962,8 +965,22 @@ class _SceneReader:
                 self.images[key] = read_texels(path, raw, where)
             texture = Texture("bitmap", pixels=self.images[key], filter=filter_type, wrap=wrap,
                               source=str(path), raw=raw)
+        elif p.type == "mesh_attribute":
+            name = p.string("name", None)
+            if name is None:
+                p.fail("missing property 'name' (the attribute: vertex_... or face_...)")
+            if not (name.startswith("vertex_") or name.startswith("face_")):
+                p.props["name"].fail(f"name: a mesh attribute's name starts with vertex_ or face_, got "
+                                     f"'{shown(name)}'", element)
+            if to_uv is not None:
+                p.props["to_uv"].fail("a mesh_attribute texture has no to_uv (Mitsuba's has none)", element)
+            # The attribute's values are checked finite when read; a scale keeps them within
+            # what a float64 product of them can hold.
+            scale = p.float("scale", 1.0, lo=-1e15, hi=1e15)
+            texture = Texture("mesh_attribute", attribute=name, scale=scale, source=element.where)
         else:
-            p.fail(f"texture '{shown(p.type)}' is not supported; tracer reads bitmap and checkerboard")
+            p.fail(f"texture '{shown(p.type)}' is not supported; tracer reads bitmap, checkerboard and "
+                   "mesh_attribute")
         if to_uv is not None:
             texture.to_uv = np.array([[to_uv[0, 0], to_uv[0, 1], to_uv[0, 3]],
                                       [to_uv[1, 0], to_uv[1, 1], to_uv[1, 3]]])
@@ -1148,6 +1165,16 @@ class _SceneReader:
 
     def scene(self, camera: Camera) -> Scene:
         g = self.geometry
+        # Mesh attributes are read from the shapes that use them, all read by now.
+        feeds: dict[int, tuple[Texture, set[int]]] = {}
+        sources = [(row, value) for row, (_, _, values) in enumerate(self.triples, start=1)
+                   for value in values.values()]
+        sources += list(self.opacities.items())
+        for row, value in sources:
+            if isinstance(value, Texture) and value.kind == "mesh_attribute":
+                feeds.setdefault(id(value), (value, set()))[1].add(row)
+        for texture, rows in feeds.values():
+            g.resolve_attribute(texture, rows, self.document.path)
         triples = [(name, type_name, self.bind_textures(row, type_name, values))
                    for row, (name, type_name, values) in enumerate(self.triples, start=1)]
         opacity = [g.textures.bind_opacity(row, self.opacities.get(row, 1.0))

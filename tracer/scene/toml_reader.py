@@ -433,15 +433,18 @@ class _Geometry:
         self.corner_uv: list[np.ndarray] = []
         self.sphere_frames: list[np.ndarray] = []
         self.textures = TextureTable()
+        self.attributes: list[dict[str, np.ndarray]] = []  # per shape: its mesh file's (mesh.Mesh)
 
     def add(self, shape_type: str, record: dict[str, Any], vertices: np.ndarray, faces: np.ndarray,
             material: int, emission: np.ndarray, normals: np.ndarray | None = None,
-            corner_uv: np.ndarray | None = None) -> None:
+            corner_uv: np.ndarray | None = None, attributes: dict[str, np.ndarray] | None = None) -> None:
         """Add a shape's triangles; ``normals`` (V, 3) unit vertex normals for smooth shading
         (a zero normal shades its triangles flat), None for flat shading; ``corner_uv`` (F, 6)
         texture coordinates at each triangle's corners, None for none (a texture then sees the
-        barycentrics, as in Mitsuba)."""
+        barycentrics, as in Mitsuba); ``attributes`` its mesh attributes by name, each (F, 3, C)
+        at the corners (``mesh.Mesh.attributes``, corners in the order of ``faces``)."""
         n = len(faces)
+        self.attributes.append(dict(attributes or {}))
         self.corner_uv.append(np.tile(NO_UV, (n, 1)) if corner_uv is None
                               else np.asarray(corner_uv, dtype=np.float64).reshape(n, 6))
         self.corner_normals.append(np.zeros((n, 9)) if normals is None
@@ -466,8 +469,35 @@ class _Geometry:
         self.sphere_material.append(material)
         self.sphere_emission.append(emission)
         self.shape_of_sphere.append(len(self.shapes))
+        self.attributes.append({})
         self.shapes.append(Shape("sphere", self._triangles, 0, material, emission, record,
                                  sphere=len(self.spheres) - 1))
+
+    def resolve_attribute(self, texture: Texture, rows: set[int], path: str) -> None:
+        """Fill the mesh-attribute texture ``texture`` (``Texture.resolve``) from the shapes'
+        attributes of its name. Every shape of material rows ``rows`` (those it feeds) must have
+        it, with the same number of channels, 1 or 3: InputError otherwise, naming the shape."""
+        name, corners, present, channels = texture.attribute, None, np.zeros(self._triangles, bool), None
+        for i, (shape, attributes) in enumerate(zip(self.shapes, self.attributes, strict=True)):
+            values = attributes.get(name)
+            where = f"shape {i + 1} ({shape.record.get('file') or shape.type})"
+            if values is None:
+                if shape.material in rows:
+                    held = ", ".join(sorted(attributes)) or "none"
+                    raise InputError(f"{where} has no mesh attribute '{name}', which its material's "
+                                     f"mesh_attribute texture reads ({texture.source}; it has: {held})", path)
+                continue
+            if values.shape[2] not in (1, 3) or channels not in (None, values.shape[2]):
+                raise InputError(f"{where}: mesh attribute '{name}' has {values.shape[2]} channels; a "
+                                 "mesh_attribute texture reads 1 or 3 (Mitsuba reads 0 from others), the "
+                                 "same in every shape", path)
+            channels = values.shape[2]
+            if corners is None:
+                corners = np.zeros((self._triangles, 3, channels))
+            corners[shape.first:shape.first + shape.count] = values
+            present[shape.first:shape.first + shape.count] = True
+        texture.resolve(np.zeros((self._triangles, 3, 1)) if corners is None else corners, present,
+                        channels or 1)
 
     def scene(self, path: str, camera: Camera, table: materials.MaterialTable, point_position: list,
               point_intensity: list, render: dict[str, Any], environment: Environment | None = None,

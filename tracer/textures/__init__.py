@@ -1,6 +1,8 @@
-"""Textures: material parameters that vary over a surface with its (u, v) coordinates.
+"""Textures: material parameters that vary over a surface, with its (u, v) coordinates or its
+mesh's corners.
 
-Two kinds, as Mitsuba 3 defines them (src/textures/checkerboard.cpp, bitmap.cpp):
+Three kinds, as Mitsuba 3 defines them (src/textures/checkerboard.cpp, bitmap.cpp,
+mesh_attribute.cpp):
 
 - ``checkerboard``: ``color0`` where the fractional parts of u and v are both above or both
   at most 1/2, ``color1`` elsewhere (Mitsuba's one-channel lookup swaps the two: tracer does
@@ -10,7 +12,14 @@ Two kinds, as Mitsuba 3 defines them (src/textures/checkerboard.cpp, bitmap.cpp)
   [0, 1] repeated, mirrored or clamped; a one-number parameter takes the RGB value's
   luminance, as Mitsuba's ``eval_1`` does.
 
-Both first map (u, v) by ``to_uv``, a 2 x 3 affine matrix (Mitsuba reads a 4 x 4 transform and
+- ``mesh_attribute``: a value a mesh file gives its vertices or faces (Mitsuba's
+  src/textures/mesh_attribute.cpp, read from PLY files by ``tracer.scene.mesh``): a vertex
+  attribute interpolated between the hit triangle's corners by the hit's barycentrics, a face
+  attribute constant on the face; times ``scale``. As in Mitsuba, a one-channel attribute
+  feeds a colour as grey, and a one-number parameter reads a three-channel one as 0
+  (``eval_1`` of an attribute with another number of channels is 0).
+
+The first two first map (u, v) by ``to_uv``, a 2 x 3 affine matrix (Mitsuba reads a 4 x 4 transform and
 keeps its upper-left 2 x 2 block and the first two entries of its last column).
 
 A scene's :class:`TextureTable` holds its textures and which material parameter each feeds
@@ -31,8 +40,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-CHECKERBOARD, BITMAP = 1, 2
-KINDS = {"checkerboard": CHECKERBOARD, "bitmap": BITMAP}
+CHECKERBOARD, BITMAP, MESH_ATTRIBUTE = 1, 2, 3
+KINDS = {"checkerboard": CHECKERBOARD, "bitmap": BITMAP, "mesh_attribute": MESH_ATTRIBUTE}
 NEAREST, BILINEAR = 0, 1
 FILTERS = ("nearest", "bilinear")
 REPEAT, MIRROR, CLAMP = 0, 1, 2
@@ -54,6 +63,11 @@ class Texture:
     pixels : (H, W, 3) float32 linear values of a bitmap, row 0 the image's top.
     filter, wrap : a bitmap's lookup (``FILTERS``, ``WRAPS``).
     source : where it came from (a file, an element), for messages and the TOML writer.
+    attribute, scale : a mesh attribute's name (``vertex_color``) and factor. Its ``pixels``
+        are (F, 9) float32, the (scaled) value at the three corners of every triangle of the
+        scene as RGB (a one-channel attribute repeated), filled in once the shapes are read
+        (:meth:`resolve`); ``channels`` the attribute's, ``present`` (F,) which triangles'
+        shapes have it.
     """
 
     kind: str
@@ -65,10 +79,32 @@ class Texture:
     wrap: str = "repeat"
     source: str = ""
     raw: bool = False
+    attribute: str = ""
+    scale: float = 1.0
+    channels: int = 3
+    present: np.ndarray | None = None
+
+    def resolve(self, corners: np.ndarray, present: np.ndarray, channels: int) -> None:
+        """A mesh attribute's values: ``corners`` (F, 3, C) at every scene triangle's corners
+        (zeros where ``present`` (F,) is False: shapes without it), C = ``channels``."""
+        rgb = np.repeat(corners, 3, axis=2) if channels == 1 else corners
+        self.pixels = np.ascontiguousarray((rgb * self.scale).reshape(-1, 9), dtype=np.float32)
+        self.present, self.channels = np.asarray(present, dtype=bool), channels
+
+    def _attribute_values(self, channels: int) -> np.ndarray:
+        """A mesh attribute's corner values on the triangles that have it, as ``channels``
+        numbers per corner (a one-number lookup of a three-channel attribute is 0, Mitsuba's)."""
+        values = self.pixels[self.present].reshape(-1, 3).astype(np.float64)
+        if channels == 1:
+            return values[:, :1] if self.channels == 1 else np.zeros((max(len(values), 1), 1))
+        return values if len(values) else np.zeros((1, 3))
 
     def mean(self, channels: int) -> np.ndarray:
         """The texture's mean over [0, 1]² as ``channels`` (1 or 3) numbers: what derived
-        material constants use. A bitmap's one-number mean is its luminance's, as Mitsuba's."""
+        material constants use. A bitmap's one-number mean is its luminance's, as Mitsuba's; a
+        mesh attribute's mean is over its triangles' corners."""
+        if self.kind == "mesh_attribute":
+            return self._attribute_values(channels).mean(axis=0)
         if self.kind == "checkerboard":
             rgb = 0.5 * (self.color0 + self.color1)
         else:
@@ -77,9 +113,13 @@ class Texture:
                                                    else float(np.mean(rgb))])
 
     def value_range(self) -> tuple[float, float]:
-        """The smallest and largest value any lookup can give (bilinear weights are convex)."""
-        values = (np.concatenate([self.color0, self.color1]) if self.kind == "checkerboard"
-                  else self.pixels)
+        """The smallest and largest value any lookup can give (bilinear and barycentric weights
+        are convex)."""
+        if self.kind == "mesh_attribute":
+            values = self._attribute_values(3)
+        else:
+            values = (np.concatenate([self.color0, self.color1]) if self.kind == "checkerboard"
+                      else self.pixels)
         return float(np.min(values)), float(np.max(values))
 
 
@@ -161,6 +201,11 @@ class TextureTable:
             if t.kind == "checkerboard":
                 row[COLOR0:COLOR0 + 3], row[COLOR1:COLOR1 + 3] = t.color0, t.color1
                 continue
+            if t.kind == "mesh_attribute":  # (F, 9) corner values; WIDTH holds the channels
+                row[WIDTH], row[OFFSET] = t.channels, offset
+                pools.append(t.pixels.ravel())
+                offset += pools[-1].size
+                continue
             height, width, _ = t.pixels.shape
             row[FILTER], row[WRAP] = FILTERS.index(t.filter), WRAPS.index(t.wrap)
             row[WIDTH], row[HEIGHT], row[OFFSET] = width, height, offset
@@ -188,6 +233,8 @@ class TextureTable:
             if t.kind == "checkerboard":
                 h.update(np.concatenate([t.color0, t.color1]).astype("<f8").tobytes())
             else:
+                if t.kind == "mesh_attribute":
+                    h.update(f"{t.channels}\0".encode())
                 h.update(f"{t.pixels.shape}\0".encode())
                 h.update(np.ascontiguousarray(t.pixels, dtype="<f4").tobytes())
         for b in self.bindings:

@@ -23,6 +23,7 @@ from . import (
     HEIGHT,
     KIND,
     LUMINANCE,
+    MESH_ATTRIBUTE,
     MIRROR,
     OFFSET,
     REPEAT,
@@ -141,6 +142,38 @@ def evaluate_one(textures, t: int, u: float, v: float) -> float:
 
 
 @jit
+def _attribute(textures, t: int, one: bool, hit_table, p: int, x):
+    """Mesh attribute ``t`` at point ``x`` of triangle ``p``: its corner values blended by the
+    barycentrics (a face attribute's corners are equal), RGB; ``one``: the one-number value,
+    0 unless the attribute has one channel (Mitsuba's ``eval_1``), in all three."""
+    info = textures.info
+    if one and int(info[t, WIDTH]) != 1:
+        return 0.0, 0.0, 0.0
+    _, b1, b2 = barycentrics(hit_table, p, x)
+    b0 = 1.0 - b1 - b2
+    pixels = textures.pixels
+    base = int(info[t, OFFSET]) + 9 * p
+    r = b0 * pixels[base] + b1 * pixels[base + 3] + b2 * pixels[base + 6]
+    if one:
+        return r, r, r
+    g = b0 * pixels[base + 1] + b1 * pixels[base + 4] + b2 * pixels[base + 7]
+    b = b0 * pixels[base + 2] + b1 * pixels[base + 5] + b2 * pixels[base + 8]
+    return r, g, b
+
+
+@jit
+def value_at(textures, t: int, one: bool, hit_table, p: int, x, u: float, v: float):
+    """Texture ``t``'s value at point ``x`` of primitive ``p``, whose (u, v) there is given: RGB,
+    or with ``one`` the one-number value (``evaluate_one``) in all three."""
+    if int(textures.info[t, KIND]) == MESH_ATTRIBUTE:
+        return _attribute(textures, t, one, hit_table, p, x)
+    if one:
+        value = evaluate_one(textures, t, u, v)
+        return value, value, value
+    return evaluate(textures, t, u, v)
+
+
+@jit
 def textured_row(textures, params, material: int, hit_table, first_sphere: int, p: int, x, scratch):
     """``(table, row)`` a hit of primitive ``p`` at ``x`` shades with: ``(params, material)``
     for a material without textures; otherwise ``(scratch, 0)``, the material's row copied into
@@ -156,11 +189,9 @@ def textured_row(textures, params, material: int, hit_table, first_sphere: int, 
     for k in range(first, last):
         column, size, t = int(bindings[k, 0]), int(bindings[k, 1]), int(bindings[k, 2])
         lo, hi = bindings[k, 3], bindings[k, 4]
-        if size == 1:
-            scratch[0, column] = min(max(evaluate_one(textures, t, u, v), lo), hi)
-        else:
-            r, g, b = evaluate(textures, t, u, v)
-            scratch[0, column] = min(max(r, lo), hi)
+        r, g, b = value_at(textures, t, size == 1, hit_table, p, x, u, v)
+        scratch[0, column] = min(max(r, lo), hi)
+        if size != 1:
             scratch[0, column + 1] = min(max(g, lo), hi)
             scratch[0, column + 2] = min(max(b, lo), hi)
     return scratch, 0
