@@ -166,3 +166,17 @@ def test_a_one_number_lookup_of_a_colour_attribute_is_zero_as_in_mitsuba():
     texture.resolve(np.tile(VERTEX_RGB[:3], (2, 1, 1)), np.array([True, True]), 3)
     assert texture.mean(1).tolist() == [0.0]
     np.testing.assert_allclose(texture.mean(3), VERTEX_RGB[:3].astype(np.float32).mean(axis=0), rtol=1e-7)
+
+
+def test_a_colour_attribute_as_an_opacity_is_told(tmp_path, capsys):
+    """A mask's opacity is one number: fed the three-channel vertex colour it reads 0 (fully
+    cut out), as Mitsuba does, and the reader says so in its note line; the render succeeds."""
+    path = tmp_path / "mask.xml"
+    text = open(scene_xml(tmp_path, "vertex_color")).read()
+    start, end = text.index('<bsdf type="twosided">'), text.index("</bsdf></bsdf>") + len("</bsdf></bsdf>")
+    path.write_text(text[:start] + '<bsdf type="mask"><texture type="mesh_attribute" name="opacity">'
+                    '<string name="name" value="vertex_color"/></texture><bsdf type="diffuse"/></bsdf>'
+                    + text[end:])
+    assert cli.main(["render", str(path), "-o", str(tmp_path / "m.exr"), "--spp", "1"]) == 0
+    err = capsys.readouterr().err
+    assert "reads the 3-channel mesh attribute 'vertex_color' as 0, as Mitsuba's eval_1 does" in err, err

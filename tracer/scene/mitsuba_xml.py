@@ -1166,15 +1166,23 @@ class _SceneReader:
     def scene(self, camera: Camera) -> Scene:
         g = self.geometry
         # Mesh attributes are read from the shapes that use them, all read by now.
-        feeds: dict[int, tuple[Texture, set[int]]] = {}
-        sources = [(row, value) for row, (_, _, values) in enumerate(self.triples, start=1)
-                   for value in values.values()]
-        sources += list(self.opacities.items())
-        for row, value in sources:
+        feeds: dict[int, tuple[Texture, set[int], bool]] = {}
+        sizes = {(t.name, param.name): param.size for t in materials.TYPES.values() for param in t.params}
+        sources = [(row, value, sizes.get((type_name, name)) == 1)
+                   for row, (_, type_name, values) in enumerate(self.triples, start=1)
+                   for name, value in values.items()]
+        sources += [(row, value, True) for row, value in self.opacities.items()]
+        for row, value, one_number in sources:
             if isinstance(value, Texture) and value.kind == "mesh_attribute":
-                feeds.setdefault(id(value), (value, set()))[1].add(row)
-        for texture, rows in feeds.values():
+                texture, rows, one = feeds.setdefault(id(value), (value, set(), False))
+                rows.add(row)
+                feeds[id(value)] = (texture, rows, one or one_number)
+        for texture, rows, one_number in feeds.values():
             g.resolve_attribute(texture, rows, self.document.path)
+            if one_number and texture.channels != 1:
+                self.notes.append(f"{texture.source}: a one-number parameter reads the "
+                                  f"{texture.channels}-channel mesh attribute '{texture.attribute}' as 0, "
+                                  "as Mitsuba's eval_1 does")
         triples = [(name, type_name, self.bind_textures(row, type_name, values))
                    for row, (name, type_name, values) in enumerate(self.triples, start=1)]
         opacity = [g.textures.bind_opacity(row, self.opacities.get(row, 1.0))
