@@ -80,10 +80,10 @@ def scene_xml(tmp_path, attribute: str, shape: str = '<string name="filename" va
 def test_ply_properties_group_as_mitsuba_groups_them():
     """Mitsuba's rules: r, g, b (or red, green, blue) make ``color``; consecutive
     {prefix}_{x|y|z}, _{r|g|b}, _{0|1|2}, _{1|2|3} fields make {prefix} ({prefix}_color for
-    r, g, b), with 1 or 3 fields; fields without a one-letter postfix, a broken sequence and
-    two-field groups are left out."""
+    r, g, b), with 1 or 3 fields; fields without a one-letter postfix, a broken sequence (s_x,
+    s_z: the whole attribute, and s_y after it) and two-field groups are left out."""
     names = ["red", "green", "blue", "n_x", "n_y", "n_z", "w_0", "c_r", "c_g", "c_b", "bad", "k_1", "k_2",
-             "q_1", "long_xy"]
+             "q_1", "long_xy", "s_x", "s_z", "s_y"]
     assert _ply_groups(names) == [("color", ["red", "green", "blue"]), ("n", ["n_x", "n_y", "n_z"]),
                                   ("w", ["w_0"]), ("c_color", ["c_r", "c_g", "c_b"]), ("q", ["q_1"])]
 
@@ -116,8 +116,10 @@ def _rho_vertex(x: float, y: float) -> np.ndarray:
 def test_radiance_is_the_interpolated_attribute_times_the_closed_form(tmp_path, attribute):
     """Rays at 50 points of the square (off its diagonal by more than rounding) under a
     directional light of irradiance E along -z: L = rho E / pi (cos = 1), rho the vertex colour
-    interpolated as :func:`_rho_vertex` says, or the face weight as grey. Exact but for float32
-    storage: relative 1e-6."""
+    interpolated as :func:`_rho_vertex` says, or the face weight as grey. Both sides use the
+    same float32 values; what differs is the rounding of the hit point and of the barycentrics
+    computed from it (a few float32 ulps of the unit square's coordinates, ~1e-7): relative
+    1e-6."""
     scene = tracer.load_scene(scene_xml(tmp_path, attribute))
     gen = np.random.default_rng(11)
     points = np.column_stack([gen.uniform(0.02, 0.98, (200, 2)), np.zeros(200)])

@@ -31,25 +31,20 @@ distribution           1      ``beckmann`` (default, as Mitsuba) or ``ggx``
 
 from __future__ import annotations
 
-import numpy as np
-
 from .. import warp
 from ..jit import jit_called
 from ..plugins import register
 from . import microfacet
 from .base import DIFFUSE, GLOSSY, MaterialType, Param, rgb, weighted
-from .plastic import COATING_PARAMS
+from .plastic import COATING_PARAMS, coating_constants
 
 CODE = 10  # the dispatch code (``tracer.materials``)
 
 
 def _derive(values: dict[str, object]) -> dict[str, object]:
-    specular = float(np.mean(values["specular_reflectance"]))
-    diffuse = float(np.mean(values["diffuse_reflectance"]))
-    # Mitsuba divides 0 by 0 when both are black (a NaN probability); such a material reflects
-    # nothing, and any weight samples it correctly.
-    weight = specular / (specular + diffuse) if specular + diffuse > 0.0 else 0.5
-    return {"eta": float(values["int_ior"]) / float(values["ext_ior"]), "specular_weight": weight}
+    """eta and w_s, as ``plastic`` derives them (Mitsuba's weight is the same ratio of means)."""
+    constants = coating_constants(values)
+    return {"eta": constants["eta"], "specular_weight": constants["specular_weight"]}
 
 
 TYPE = register(MaterialType(module=__name__, rank=CODE, name=

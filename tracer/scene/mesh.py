@@ -228,9 +228,12 @@ def _ply_groups(names: list[str]) -> list[tuple[str, list[str]]]:
             flush()
             prefix, fields = None, []
             continue
-        if prefix is not None and head == prefix and len(fields) < 4 and \
-                postfix == _POSTFIXES[category][len(fields)]:
-            fields.append(name)
+        if prefix is not None and head == prefix:
+            if len(fields) < 4 and postfix == _POSTFIXES[category][len(fields)]:
+                fields.append(name)
+            else:  # a broken sequence: Mitsuba drops the whole attribute, and the prefix after it
+                seen.add(prefix)
+                prefix, fields = None, []
             continue
         flush()
         prefix, fields = None, []
