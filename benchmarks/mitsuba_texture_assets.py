@@ -10,7 +10,16 @@
 - meshes/quad_uv.obj: a quad of two triangles whose corners carry texture coordinates through
   `vt` indices that differ from the position indices, with a seam (one position with two `vt`);
 - meshes/quad_uv.ply: the same quad with per-vertex `u`, `v`;
-- meshes/quad_uv.serialized: the same quad, Mitsuba's serialized format (version 4, with uv).
+- meshes/quad_uv.serialized: the same quad, Mitsuba's serialized format (version 4, with uv);
+
+and those of tracer/scenes/mitsuba/normal_maps.xml:
+
+- textures/bumps.png: 48 x 32 one-channel 8-bit heights, a product of sines (a bump map's
+  height field: its gradient, not its value, is what shades);
+- textures/normals.png: 48 x 32 8-bit RGB normals 0.5 + 0.5 n of another field of sines,
+  tilted up to about 35 degrees (a wrong tangent frame turns the tilt the wrong way);
+- meshes/uv_sphere.obj: a sphere of 32 x 16 quads (fanned into triangles) with `vt`
+  coordinates (a seam at u = 0) and `vn` normals.
 """
 
 from __future__ import annotations
@@ -62,6 +71,40 @@ def main() -> None:
     body += positions.astype("<f4").tobytes() + uv.astype("<f4").tobytes() + faces.tobytes()
     stream = struct.pack("<HH", 0x041C, 4) + zlib.compress(body)
     (HERE / "meshes" / "quad_uv.serialized").write_bytes(stream + struct.pack("<QI", 0, 1))
+    write_normal_map_assets()
+
+
+def write_normal_map_assets() -> None:
+    x, y = np.meshgrid((np.arange(48) + 0.5) / 48, (np.arange(32) + 0.5) / 32)
+    heights = 0.5 + 0.4 * np.sin(2 * np.pi * 3 * x) * np.sin(2 * np.pi * 2 * y)
+    write_image(HERE / "textures" / "bumps.png", np.round(255 * heights)[..., None].astype(np.uint8), True)
+    # The normal of the surface z = k f(x, y), f another field of sines: (-k f_x, -k f_y, 1).
+    k = 0.12
+    f_x = 2 * np.pi * 2 * np.cos(2 * np.pi * 2 * x) * np.cos(2 * np.pi * 3 * y)
+    f_y = -2 * np.pi * 3 * np.sin(2 * np.pi * 2 * x) * np.sin(2 * np.pi * 3 * y)
+    n = np.stack([-k * f_x, -k * f_y, np.ones_like(x)], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    write_image(HERE / "textures" / "normals.png", np.round(255 * (0.5 + 0.5 * n)).astype(np.uint8), True)
+    rings, segments = 16, 32
+    obj = ["# uv_sphere: texture coordinates (a seam at u = 0) and vertex normals"]
+    for i in range(rings + 1):
+        theta = np.pi * i / rings
+        for j in range(segments + 1):
+            phi = 2 * np.pi * j / segments
+            p = (np.sin(theta) * np.cos(phi), np.cos(theta), np.sin(theta) * np.sin(phi))
+            obj.append("v {:.6f} {:.6f} {:.6f}".format(*p))
+            obj.append("vn {:.6f} {:.6f} {:.6f}".format(*p))
+            obj.append(f"vt {j / segments:.6f} {1 - i / rings:.6f}")
+    for i in range(rings):
+        for j in range(segments):
+            a, b = i * (segments + 1) + j + 1, (i + 1) * (segments + 1) + j + 1
+            corners = [a, a + 1, b + 1, b]
+            if i == 0:
+                corners = [a, b + 1, b]
+            elif i == rings - 1:
+                corners = [a, a + 1, b]
+            obj.append("f " + " ".join(f"{c}/{c}/{c}" for c in corners))
+    (HERE / "meshes" / "uv_sphere.obj").write_text("\n".join(obj) + "\n")
 
 
 if __name__ == "__main__":

@@ -58,6 +58,7 @@ REFERENCES = {
     "rough_glass": (96, 72, 32, 256),
     "mask": (96, 72, 32, 256),
     "pplastic": (96, 72, 32, 256),
+    "normal_maps": (96, 72, 32, 256),
 }
 
 # tracer's side of the comparison (--compare and tests/test_mitsuba_agreement.py).

@@ -114,7 +114,7 @@ class DirectLighting:
         features = FeatureSet(materials, technique_names(self.lights.tables), strategy.light_selection,
                               sampler, strategy.direction_technique if strategy.direction_count else None,
                               self.combiner.name, bool(strategy.light_count), bool(strategy.direction_count),
-                              strategy.learns, textures=bool(self.scene.textures.bindings),
+                              strategy.learns, textures=self.scene.textures.shading,
                               environment=self.scene.environment is not None)
         return features.widened() if shared_builds() else features
 

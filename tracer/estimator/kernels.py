@@ -26,13 +26,13 @@ import math
 import numpy as np
 
 from .. import lights, mis, tuning
-from ..frame import add_scaled, normalized, sub
+from ..frame import add_scaled, normalized, scale, sub
 from ..geometry import offset_origin
 from ..jit import jit
 from ..kernels import UNBOUND, kernel
 from ..lights import environment as environment_light
 from ..samplers import dimensions
-from ..textures import lookup
+from ..textures import lookup, shading_frames
 from . import light_samples, shading_point
 from .combiners import ris
 from .direction_samples import direction_arrays, direction_sample, direction_value, environment_value
@@ -111,9 +111,20 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
         if through:
             receiver = (0.0, 0.0, 0.0)
         here = params
+        # A normal or bump map tilts the frame every sample is taken in; each sample's value is
+        # then multiplied by what the tilt masks and shadows (``tracer.textures.shading_frames``).
+        tilted, unperturbed, a2 = False, normal, 0.0
         if TEXTURES:
+            own_row = material
             here, material = lookup.textured_row(textures, params, material, hit_table, first_sphere, p, x,
                                                  scratch)
+            if textures.perturb[own_row, 0] != 0.0:
+                tilted = True
+                reflects, normal, s, t, wo, a2 = shading_frames.perturbed(
+                    textures, own_row, hit_table, first_sphere, corner_normals, p, x, d, unperturbed)
+                if not reflects:
+                    continue
+                point = (x, geometric, normal, s, t, wo)
         surface = (kind, material, receiver, through)
         state = dispatch.start(sampler, pixel[lane], sample[lane])
         if RESAMPLES:
@@ -130,6 +141,9 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
                 wi_world, dist, value, raw, w_balance, share_t = light_samples.light_sample(
                     j, sampler, state, selection, technique, light_rows, environment, here, plan, point,
                     surface, (own_light, own_dir))
+                if TEXTURES and tilted:
+                    bend = shading_frames.factor(unperturbed, normal, a2, wi_world)
+                    value, raw = scale(bend, value), scale(bend, raw)
                 # A sample that cannot contribute casts no ray. Learning looks at the unweighted
                 # value: whether a sample carries light must not depend on the heuristic (max's
                 # weight 0 would hide it from the allocation's statistics).
@@ -160,6 +174,8 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
             for j in range(dirs_here):
                 wi_world, value, pdf_dir, delta = direction_sample(j, sampler, state, here, plan, point,
                                                                    surface, own_dir)
+                if TEXTURES and tilted:
+                    value = scale(shading_frames.factor(unperturbed, normal, a2, wi_world), value)
                 if not (value[0] > 0.0 or value[1] > 0.0 or value[2] > 0.0):
                     _flag_nan(radiance, lane, value)
                     continue

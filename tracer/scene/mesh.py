@@ -184,6 +184,12 @@ def _load(trimesh, mesh_path: Path) -> tuple:
     vertices, faces = np.concatenate(vertices), np.concatenate(faces)
     if text is not None:  # an OBJ's coordinates belong to its face corners: read from its text
         uv = _obj_corner_uv(text, vertices[faces], mesh_path)
+        if all_normals is None:  # trimesh dropped them (``_obj_corner_normals``)
+            corner_normals = _obj_corner_normals(text, vertices[faces], mesh_path)
+            if corner_normals is not None:  # a vertex per corner, each with its own normal
+                vertices = vertices[faces].reshape(-1, 3)
+                faces = np.arange(len(vertices), dtype=np.int64).reshape(-1, 3)
+                all_normals = corner_normals.reshape(-1, 3)
     else:
         uv = None if any(c is None for c in corner_uv) else np.concatenate(corner_uv)
     return vertices, faces, all_normals, uv, attributes
@@ -311,41 +317,61 @@ def _fan_triangulated_obj(text: str) -> str:
 
 def _obj_corner_uv(text: str, corners: np.ndarray, mesh_path: Path) -> np.ndarray | None:
     """(F, 6) texture coordinates of an OBJ's triangle corners, or None if it has none: each
-    face corner's ``vt`` index (1-based, or negative: counted back from the latest), read from
-    the text, since trimesh keeps one coordinate per vertex and an OBJ vertex may have several
-    (a seam). A corner without one gets (0, 0). The faces are those trimesh read, in order:
+    face corner's ``vt`` index, read from the text, since trimesh keeps one coordinate per
+    vertex and an OBJ vertex may have several (a seam). A corner without one gets (0, 0)."""
+    return _obj_corner_values(text, corners, mesh_path, "vt", 1, "texture coordinate", (0.0, 0.0))
+
+
+def _obj_corner_normals(text: str, corners: np.ndarray, mesh_path: Path) -> np.ndarray | None:
+    """(F, 9) normals of an OBJ's triangle corners by their ``vn`` indices, read from the text,
+    or None unless every corner has one: for the files whose normals trimesh drops (it does when
+    a vertex is referenced by no face, a valid OBJ)."""
+    return _obj_corner_values(text, corners, mesh_path, "vn", 2, "normal", None)
+
+
+def _obj_corner_values(text: str, corners: np.ndarray, mesh_path: Path, tag: str, field: int, what: str,
+                       missing: tuple | None) -> np.ndarray | None:
+    """The ``tag`` values (``vt``: 2 numbers, ``vn``: 3) of an OBJ's triangle corners as (F, 3 k),
+    by each face corner's index in slash-separated ``field`` (1-based, or negative: counted back
+    from the latest), or None if the file has none. A corner without one gets ``missing``, or
+    with ``missing`` None the result is None. The faces are those trimesh read, in order:
     checked against ``corners`` (F, 3, 3), their positions."""
-    if not re.search(r"^[ \t]*vt[ \t]", text, re.MULTILINE):
-        return None  # no coordinates: no need to read the faces again
+    if not re.search(rf"^[ \t]*{tag}[ \t]", text, re.MULTILINE):
+        return None  # none in the file: no need to read the faces again
+    size = 2 if tag == "vt" else 3
     positions: list[list[float]] = []
-    coordinates: list[list[float]] = []
+    values: list[list[float]] = []
     position_index: list[int] = []
-    uv_index: list[int] = []
+    value_index: list[int] = []
     for line in text.split("\n"):
         tokens = line.split()
         if not tokens:
             continue
         if tokens[0] == "v" and len(tokens) >= 4:
             positions.append([float(t) for t in tokens[1:4]])
-        elif tokens[0] == "vt" and len(tokens) >= 3:
-            coordinates.append([float(t) for t in tokens[1:3]])
+        elif tokens[0] == tag and len(tokens) >= size + 1:
+            values.append([float(t) for t in tokens[1:size + 1]])
         elif tokens[0] == "f" and len(tokens) == 4:
             for corner in tokens[1:]:
                 fields = corner.split("/")
-                p, t = int(fields[0]), int(fields[1]) if len(fields) > 1 and fields[1] else 0
+                p = int(fields[0])
+                k = int(fields[field]) if len(fields) > field and fields[field] else 0
                 position_index.append(p - 1 if p > 0 else len(positions) + p)
-                uv_index.append(-1 if t == 0 else (t - 1 if t > 0 else len(coordinates) + t))
-    if not coordinates or not uv_index:
+                value_index.append(-1 if k == 0 else (k - 1 if k > 0 else len(values) + k))
+    if not values or not value_index:
         return None
     ours = np.asarray(positions, dtype=np.float64)[np.asarray(position_index)].reshape(-1, 3, 3)
     if ours.shape != corners.shape or not np.array_equal(ours, corners):
-        raise MeshError(f"{mesh_path}: its texture coordinates could not be matched to its faces "
-                        "(convert it to PLY)")
-    table = np.concatenate([np.asarray(coordinates, dtype=np.float64), np.zeros((1, 2))])
-    index = np.asarray(uv_index)
-    if index.max() >= len(coordinates) or index.min() < -1:
-        raise MeshError(f"{mesh_path} has a face corner whose texture coordinate index is out of range")
-    return table[index].reshape(-1, 6)
+        raise MeshError(f"{mesh_path}: its {what}s could not be matched to its faces (convert it to PLY)")
+    index = np.asarray(value_index)
+    if index.max() >= len(values) or index.min() < -1:
+        raise MeshError(f"{mesh_path} has a face corner whose {what} index is out of range")
+    if missing is None and index.min() < 0:
+        return None
+    table = np.concatenate([np.asarray(values, dtype=np.float64), np.zeros((1, size))])
+    if missing is not None:
+        table[-1] = missing
+    return table[index].reshape(-1, 3 * size)
 
 
 def angle_weighted_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

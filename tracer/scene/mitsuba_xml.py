@@ -28,7 +28,7 @@ from ..camera import Camera
 from ..errors import InputError, one_line, shown
 from ..materials import conductor, plastic
 from ..record import MAX_SAMPLE_INDEX
-from ..textures import FILTERS, LUMINANCE, WRAPS, Texture, bind
+from ..textures import FILTERS, LUMINANCE, WRAPS, Perturbation, Texture, bind
 from ..textures.bitmap import read_texels
 from . import spectrum
 from .environment import Environment, rotation_problem
@@ -73,7 +73,10 @@ RIGID_TOLERANCE = 1e-3
 
 _REFLECTANCES = ("reflectance", "diffuse_reflectance", "specular_reflectance")
 _READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "pplastic",
-                         "twosided", "dielectric", "thindielectric", "roughdielectric", "mask"})
+                         "twosided", "dielectric", "thindielectric", "roughdielectric", "mask",
+                         "normalmap", "bumpmap"})
+# BSDFs that wrap one other: a row of its own for the BSDF inside, carrying what they add.
+_WRAPPERS = ("twosided", "mask", "normalmap", "bumpmap")
 _DIELECTRICS = frozenset({"dielectric", "roughdielectric", "thindielectric"})
 # Mitsuba 3.9.1's BSDF plugins (src/bsdfs/*.cpp): an unused declaration of one that tracer does
 # not read is accepted unread (it changes no image); any other type is unknown to Mitsuba too.
@@ -268,6 +271,7 @@ class _SceneReader:
         self.triples: list[tuple[str, str, dict[str, object]]] = []
         self.sides: list[bool] = []
         self.opacities: dict[int, object] = {}  # a masked row's opacity: a number or a Texture
+        self.perturbations: dict[int, Perturbation] = {}  # a normal or bump map's row
         self.rows: dict[tuple[int, bool], int] = {}
         self.names: set[str] = set()
         self.emitter_owner: dict[int, Element] = {}
@@ -850,7 +854,7 @@ class _SceneReader:
             if id(bsdf) in checked:
                 continue
             p = self.plugin(bsdf)
-            if p.type not in ("twosided", "mask"):
+            if p.type not in _WRAPPERS:
                 if p.type in _READ_BSDFS or p.type not in _MITSUBA_BSDFS:
                     self.bsdf_triple(p)
                 checked.add(id(bsdf))
@@ -860,6 +864,10 @@ class _SceneReader:
                 self.mask_opacity(p)
                 if len(nested) != 1:
                     p.fail(f"mask needs one nested bsdf, not {len(nested)}")
+            elif p.type in ("normalmap", "bumpmap"):
+                self.perturbation(p)
+                if len(nested) != 1:
+                    p.fail(f"{p.type} needs one nested bsdf, not {len(nested)}")
             elif not nested or len(nested) > 2:
                 p.fail(f"twosided needs one or two nested BSDFs, not {len(nested)}")
             for inner, naming in nested:
@@ -877,18 +885,21 @@ class _SceneReader:
         key = (id(bsdf), bsdf.attrs.get("type") == "twosided")
         if key in self.rows:
             return self.rows[key]
-        ident, inner, type_name, values, twosided, opacity = self.material_parts(bsdf)
+        ident, inner, type_name, values, twosided, opacity, tilt = self.material_parts(bsdf)
         name = self.unique(ident or f"{inner.type}@{Path(inner.element.file).name}:{inner.element.line}")
         row = self.rows[key] = self.add_material(name, type_name, values, twosided)
         if opacity is not None:
             self.opacities[row] = opacity
+        if tilt is not None:
+            self.perturbations[row] = tilt
         return row
 
     def material_parts(self, bsdf: Element, sides: bool = False) -> tuple:
-        """``(id, inner plugin, type name, values, twosided, opacity)`` of the BSDF ``bsdf``:
-        the first id on the way in, the innermost BSDF that tracer's type reads, its type and
-        values, whether it reflects on both sides, and a ``mask``'s opacity (a number or a
-        texture; Mitsuba's default 0.5) or None. ``sides``: a ``twosided`` wraps it.
+        """``(id, inner plugin, type name, values, twosided, opacity, perturbation)`` of the BSDF
+        ``bsdf``: the first id on the way in, the innermost BSDF that tracer's type reads, its type
+        and values, whether it reflects on both sides, a ``mask``'s opacity (a number or a
+        texture; Mitsuba's default 0.5) or None, and a ``normalmap``'s or ``bumpmap``'s
+        :class:`Perturbation` or None. ``sides``: a ``twosided`` wraps it.
 
         A ``mask`` becomes its nested BSDF's material with the mask's opacity
         (``MaterialTable.opacity``, ``tracer.estimator.cutouts``); a ``twosided`` may wrap a mask
@@ -907,8 +918,23 @@ class _SceneReader:
                 naming.fail("a mask inside a mask is not supported (give one mask the product of the "
                             "opacities)", bsdf)
             p.done()
-            inner_id, plugin, type_name, values, twosided, _ = self.material_parts(inner, sides)
-            return ident or inner_id, plugin, type_name, values, twosided, opacity
+            inner_id, plugin, type_name, values, twosided, _, tilt = self.material_parts(inner, sides)
+            return ident or inner_id, plugin, type_name, values, twosided, opacity, tilt
+        if p.type in ("normalmap", "bumpmap"):
+            tilt = self.perturbation(p)
+            nested = p.nested("bsdf")
+            if len(nested) != 1:
+                p.fail(f"{p.type} needs one nested bsdf, not {len(nested)}")
+            inner, naming = nested[0]
+            if inner.attrs.get("type") in ("normalmap", "bumpmap", "twosided"):
+                naming.fail(f"a {shown(inner.attrs.get('type', ''))} inside a {p.type} is not supported "
+                            f"(put a twosided outside the {p.type}; give one map)", bsdf)
+            p.done()
+            inner_id, plugin, type_name, values, twosided, opacity, _ = self.material_parts(inner, sides)
+            if getattr(materials.TYPES[type_name], "transmits", False) or type_name in _DIELECTRICS:
+                naming.fail(f"a {p.type} around {type_name} is not supported (tracer tilts the frame of "
+                            "materials that only reflect)", bsdf)
+            return ident or inner_id, plugin, type_name, values, twosided, opacity, tilt
         if p.type == "twosided":
             nested = p.nested("bsdf")
             if not nested:
@@ -921,10 +947,10 @@ class _SceneReader:
             if nested[0][0].attrs.get("type") == "twosided":
                 nested[0][1].fail("a twosided inside a twosided", bsdf)
             p.done()
-            inner_id, plugin, type_name, values, _, opacity = self.material_parts(nested[0][0], True)
-            return ident or inner_id, plugin, type_name, values, True, opacity
+            inner_id, plugin, type_name, values, _, opacity, tilt = self.material_parts(nested[0][0], True)
+            return ident or inner_id, plugin, type_name, values, True, opacity, tilt
         type_name, values = self.bsdf_triple(p)
-        return ident, p, type_name, values, sides or type_name in _DIELECTRICS, None
+        return ident, p, type_name, values, sides or type_name in _DIELECTRICS, None, None
 
     def mask_opacity(self, p: _Plugin) -> object:
         """A ``mask``'s opacity: a texture, or a number in [0, 1] (a colour's luminance, as
@@ -932,6 +958,32 @@ class _SceneReader:
         return self.textured(p, "opacity",
                              lambda: float(np.clip(p.color("opacity", 0.5, "other") @ LUMINANCE, 0.0, 1.0)),
                              "other")
+
+    def perturbation(self, p: _Plugin) -> Perturbation:
+        """A ``normalmap``'s or ``bumpmap``'s :class:`Perturbation`, read as Mitsuba 3.9.1 reads
+        it: a normal map's ``normalmap`` texture (or a constant RGB); a bump map's one nested
+        texture, whatever its name, and its ``scale``; both maps' ``flip_invalid_normals`` and
+        ``use_shadowing_function`` (default true)."""
+        if p.type == "normalmap":
+            texture = self.textured(p, "normalmap", lambda: None, "other")
+            if texture is None:
+                if not p.has("normalmap"):
+                    p.fail("missing property 'normalmap' (a texture or an rgb)")
+                texture = _constant_texture(p.color("normalmap", 0.0, "other", lo=-math.inf),
+                                            p.props["normalmap"].where)
+            scale = 1.0
+        else:
+            found = [(obj, written) for obj, written in p.objects if obj.tag == "texture"]
+            if len(found) != 1:
+                p.fail(f"bumpmap needs one nested texture (the height field), not {len(found)}")
+            p.taken.add(id(found[0][1]))
+            texture = self.texture(found[0][0], "other")
+            if texture.kind != "bitmap":
+                found[0][1].fail(f"a bumpmap's height field is a bitmap here, not a {texture.kind} "
+                                 "(Mitsuba takes the gradient of bitmaps only)", p.element)
+            scale = p.float("scale", 1.0, lo=-1e6, hi=1e6)
+        return Perturbation(p.type, texture, scale, p.boolean("flip_invalid_normals", True),
+                            p.boolean("use_shadowing_function", True))
 
     def texture(self, element: Element, kind: str) -> Texture:
         """The texture ``element`` (read once: references share it); ``kind`` as for colours."""
@@ -1076,8 +1128,8 @@ class _SceneReader:
                            "number)")
         else:
             p.fail(f"bsdf '{shown(kind)}' is not supported; tracer reads diffuse, conductor, roughconductor, "
-                   "plastic, roughplastic, pplastic, dielectric, roughdielectric, thindielectric, twosided "
-                   "and mask")
+                   "plastic, roughplastic, pplastic, dielectric, roughdielectric, thindielectric, twosided, "
+                   "mask, normalmap and bumpmap")
         p.done()
         return kind, values
 
@@ -1187,12 +1239,20 @@ class _SceneReader:
                    for row, (name, type_name, values) in enumerate(self.triples, start=1)]
         opacity = [g.textures.bind_opacity(row, self.opacities.get(row, 1.0))
                    for row in range(1, len(self.triples) + 1)]
+        for row, tilt in self.perturbations.items():
+            g.textures.bind_perturbation(row, tilt)
         try:
             table = materials.table(triples, self.sides, opacity)
         except ValueError as exc:  # the parameter ranges every reader is held to (Param.check)
             raise InputError(str(exc), self.document.path) from None
         return g.scene(self.document.path, camera, table, self.positions, self.intensities, self.render,
                        self.environment, spots=self.spots, directionals=self.directionals)
+
+
+def _constant_texture(rgb: np.ndarray, where: str) -> Texture:
+    """A constant as a texture: one texel, looked up nearest (its gradient is 0)."""
+    return Texture("bitmap", pixels=np.asarray(rgb, dtype=np.float32).reshape(1, 1, 3), filter="nearest",
+                   source=where, raw=True)
 
 
 def _similarity_problem(linear: np.ndarray) -> str | None:

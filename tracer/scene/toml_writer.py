@@ -25,9 +25,12 @@ import numpy as np
 from .. import __version__, materials
 from ..atomic import atomic_write_many, bytes_writer, text_writer
 from ..errors import InputError
+from ..textures import BUMP_MAP, NORMAL_MAP
 from .icosphere import unit_icosphere
 from .model import Scene, Shape
 
+# How the refusal names a perturbation kind.
+_MAPS = {NORMAL_MAP: "normal map", BUMP_MAP: "bump map"}
 _BARE_KEY = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-")
 
 
@@ -44,7 +47,8 @@ def write_scene(scene: Scene, path: str | os.PathLike[str], source: str | None =
     if scene.textures:
         # The TOML format has no textures yet: writing their means would render another image.
         names = sorted({b.param for b in scene.textures.bindings}
-                       | ({"opacity"} if scene.textures.cutouts else set()))
+                       | ({"opacity"} if scene.textures.cutouts else set())
+                       | {_MAPS[kind] for kind, *_ in scene.textures.perturbations.values()})
         raise InputError(f"the scene has textures ({', '.join(names)}), which tracer's TOML format does not "
                          "hold yet: render the XML scene itself", str(scene.path))
     if scene.environment is not None and scene.environment.kind != "constant":

@@ -19,6 +19,9 @@ mesh_attribute.cpp):
   feeds a colour as grey, and a one-number parameter reads a three-channel one as 0
   (``eval_1`` of an attribute with another number of channels is 0).
 
+A texture may also perturb a material's shading frame (:class:`Perturbation`, Mitsuba's
+``normalmap`` and ``bumpmap`` BSDFs around the material; ``tracer.textures.shading_frames``).
+
 The first two first map (u, v) by ``to_uv``, a 2 x 3 affine matrix (Mitsuba reads a 4 x 4 transform and
 keeps its upper-left 2 x 2 block and the first two entries of its last column).
 
@@ -50,6 +53,12 @@ WRAPS = ("repeat", "mirror", "clamp")
 # Columns of a texture's row in ``Textures.info`` (float64).
 KIND, TO_UV, FILTER, WRAP, WIDTH, HEIGHT, OFFSET, COLOR0, COLOR1 = 0, 1, 7, 8, 9, 10, 11, 12, 15
 INFO_WIDTH = 18
+# Columns of a material row's perturbation in ``Textures.perturb`` (float64): its kind (0 none,
+# NORMAL_MAP, BUMP_MAP), its texture, a bump map's scale, and Mitsuba's two switches.
+PERTURB_KIND, PERTURB_TEXTURE, PERTURB_SCALE, PERTURB_FLIP, PERTURB_SHADOWING = 0, 1, 2, 3, 4
+PERTURB_WIDTH = 5
+NORMAL_MAP, BUMP_MAP = 1, 2
+PERTURBATIONS = {"normalmap": NORMAL_MAP, "bumpmap": BUMP_MAP}
 # Rec. 709 luminance, as Mitsuba's ``luminance`` (include/mitsuba/core/spectrum.h).
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 
@@ -124,6 +133,26 @@ class Texture:
 
 
 @dataclass(frozen=True)
+class Perturbation:
+    """A texture that perturbs a material's shading frame, as Mitsuba 3.9.1's ``normalmap`` and
+    ``bumpmap`` BSDFs do around the BSDF they wrap (src/bsdfs/normalmap.cpp, bumpmap.cpp).
+
+    kind : ``normalmap`` (the texture's RGB is the normal, 2 rgb - 1, in the shading frame whose
+        s axis is dp/du) or ``bumpmap`` (the texture is a height field: its gradient, times
+        ``scale``, tilts dp/du and dp/dv).
+    flip_invalid : a normal facing away from the viewer is mirrored about the shading normal
+        (Mitsuba's ``flip_invalid_normals``).   shadowing : the BSDF is multiplied by Estevez
+        et al.'s bump-terminator shadowing (Mitsuba's ``use_shadowing_function``).
+    """
+
+    kind: str
+    texture: Texture
+    scale: float = 1.0
+    flip_invalid: bool = True
+    shadowing: bool = True
+
+
+@dataclass(frozen=True)
 class Binding:
     """Texture ``texture`` feeds parameter ``param`` (``size`` columns from ``column``) of the
     material in row ``material``; lookups are clamped into [lo, hi], the parameter's range."""
@@ -147,6 +176,8 @@ class Textures(NamedTuple):
         first_binding[k + 1] - 1.
     opacity : (K,) int64 per material row, the texture that gives its opacity
         (``MaterialTable.opacity``), -1 where it is a constant.
+    perturb : (K, PERTURB_WIDTH) float64 per material row, its normal or bump map (columns
+        ``PERTURB_KIND`` ...; kind 0: none).
     corner_uv : (F, 6) float64 (u, v) at each triangle's three corners, or (0, 6).
     sphere_frame : (S, 9) float64 rows of each analytic sphere's world-to-local rotation, for
         Mitsuba's spherical (u, v), or (0, 9).
@@ -159,20 +190,29 @@ class Textures(NamedTuple):
     opacity: np.ndarray
     corner_uv: np.ndarray
     sphere_frame: np.ndarray
+    perturb: np.ndarray
 
 
 @dataclass
 class TextureTable:
-    """A scene's textures and what they feed: material parameters (``bindings``) and the
-    opacity of material rows (``cutouts``: row -> texture index)."""
+    """A scene's textures and what they feed: material parameters (``bindings``), the
+    opacity of material rows (``cutouts``: row -> texture index) and their shading frames
+    (``perturbations``: row -> (kind code, texture index, scale, flip_invalid, shadowing))."""
 
     textures: list[Texture] = field(default_factory=list)
     bindings: list[Binding] = field(default_factory=list)
     cutouts: dict[int, int] = field(default_factory=dict)
+    perturbations: dict[int, tuple[int, int, float, bool, bool]] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
         """Whether anything is textured (then the scene keeps its texture coordinates)."""
-        return bool(self.bindings or self.cutouts)
+        return bool(self.bindings or self.cutouts or self.perturbations)
+
+    @property
+    def shading(self) -> bool:
+        """Whether a lookup happens during shading (a bound parameter or a perturbed frame):
+        what the kernels' ``TEXTURES`` switch is for. Opacity alone is read by the cutouts."""
+        return bool(self.bindings or self.perturbations)
 
     def add(self, texture: Texture) -> int:
         """The index of ``texture`` in the table, added unless it is there (the same object)."""
@@ -190,6 +230,12 @@ class TextureTable:
             return float(opacity)
         self.cutouts[row] = self.add(opacity)
         return float(np.clip(opacity.mean(1)[0], 0.0, 1.0))
+
+    def bind_perturbation(self, row: int, perturbation: Perturbation) -> None:
+        """Material ``row``'s shading frame is perturbed by ``perturbation``."""
+        p = perturbation
+        self.perturbations[row] = (PERTURBATIONS[p.kind], self.add(p.texture), float(p.scale),
+                                   bool(p.flip_invalid), bool(p.shadowing))
 
     def arrays(self, material_count: int, corner_uv: np.ndarray, sphere_frame: np.ndarray) -> Textures:
         """The kernels' arrays (``Textures``) for a table of ``material_count`` materials."""
@@ -220,9 +266,12 @@ class TextureTable:
         opacity = np.full(material_count, -1, dtype=np.int64)
         for row, texture in self.cutouts.items():
             opacity[row] = texture
+        perturb = np.zeros((material_count, PERTURB_WIDTH))
+        for row, values in self.perturbations.items():
+            perturb[row] = values
         return Textures(info, pixels, bindings, first, opacity,
                         np.ascontiguousarray(corner_uv, dtype=np.float64),
-                        np.ascontiguousarray(sphere_frame, dtype=np.float64))
+                        np.ascontiguousarray(sphere_frame, dtype=np.float64), perturb)
 
     def digest(self) -> bytes:
         """SHA-256 of everything a render reads of the table (scene digests include it)."""
@@ -241,6 +290,8 @@ class TextureTable:
             h.update(f"{b.material} {b.param} {b.column} {b.size} {b.texture} {b.lo!r} {b.hi!r}\0".encode())
         for row, texture in sorted(self.cutouts.items()):  # none in scenes digested before masks
             h.update(f"opacity {row} {texture}\0".encode())
+        for row, values in sorted(self.perturbations.items()):  # none before normal maps
+            h.update(f"perturb {row} {values!r}\0".encode())
         return h.digest()
 
 
