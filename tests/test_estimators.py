@@ -276,6 +276,10 @@ SELECTION_FURNACE = [Strategy("light", light_selection="bvh"), Strategy("mis", l
                      Strategy.ris(8, "light+bsdf", light_selection="bvh")]
 
 
+# CI budget (147 s from a cold cache: five builds of its own): runs with -m slow. The fast suite
+# still samples the light BVH and ris against MIS in tests/test_scenes.py (the street's BVH,
+# ris over lights and over lights and BSDF; the emissive mesh's BVH MIS and ris).
+@pytest.mark.slow
 def test_white_furnace_light_selections_and_ris(write_scene, tmp_path):
     """The white furnace (radiance 1 from all 320 inward faces of the sphere; a white plate
     reflects exactly 1) with lights picked by the BVH and with ris: t-tests of 50,048 samples

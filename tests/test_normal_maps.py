@@ -260,3 +260,57 @@ def test_an_obj_with_a_vertex_no_face_uses_keeps_its_normals(tmp_path):
     assert mesh.normals is not None
     np.testing.assert_allclose(mesh.normals[mesh.faces[0]], [[0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8]])
     np.testing.assert_array_equal(mesh.vertices[mesh.faces[0]], [[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+
+
+GREY = [0.5, 0.5, 0.5]
+TOML_SCENE = {"camera": {"origin": [0, 0, 5], "target": [0, 0, 0], "fov": 40, "width": 8, "height": 8},
+              "shapes": [{"type": "quad", "origin": [-1, -1, 0], "edge1": [2, 0, 0], "edge2": [0, 2, 0],
+                          "material": "m"}],
+              "lights": [{"type": "point", "position": [0, 0, 2], "intensity": [1, 1, 1]}]}
+
+
+def test_toml_maps_are_mitsubas(tmp_path):
+    """A TOML quad's normal_map and bump_map (with bump_scale and both switches) give the same
+    perturbation rows and texels as the Mitsuba rectangle's normalmap and bumpmap (the quad is
+    Mitsuba's rectangle, tests/test_textures.py)."""
+    normals = f"{MITSUBA}/textures/normals.png"
+    cases = [({"normal_map": {"texture": "bitmap", "file": normals, "raw": True}},
+              f'<bsdf type="normalmap"><texture name="normalmap" type="bitmap">'
+              f'<boolean name="raw" value="true"/><string name="filename" value="{normals}"/></texture>'
+              '<bsdf type="diffuse"/></bsdf>'),
+             ({"bump_map": {"texture": "bitmap", "file": normals}, "bump_scale": 0.3,
+               "flip_invalid_normals": False, "use_shadowing_function": False},
+              f'<bsdf type="bumpmap"><float name="scale" value="0.3"/><boolean name="flip_invalid_normals" '
+              f'value="false"/><boolean name="use_shadowing_function" value="false"/><texture type="bitmap">'
+              f'<string name="filename" value="{normals}"/></texture><bsdf type="diffuse"/></bsdf>')]
+    for keys_given, bsdf in cases:
+        material = {"type": "diffuse", "reflectance": GREY, "twosided": False, **keys_given}
+        toml = tracer.load_scene(dict(TOML_SCENE, materials={"m": material}))
+        xml = _scene_with(tmp_path, '<shape type="rectangle">{bsdf}</shape>', bsdf)
+        assert list(toml.textures.perturbations.values()) == list(xml.textures.perturbations.values())
+        np.testing.assert_array_equal(toml.textures.textures[0].pixels, xml.textures.textures[0].pixels)
+
+
+@pytest.mark.parametrize("given, words", [
+    ({"normal_map": {"texture": "checkerboard"}, "bump_map": {"texture": "checkerboard"}},
+     "materials.m.bump_map: give a normal_map or a bump_map, not both"),
+    ({"bump_scale": 2.0}, "materials.m.bump_scale: needs a normal_map or a bump_map"),
+    ({"bump_map": {"texture": "checkerboard"}},
+     "materials.m.bump_map: a bump map is a bilinear bitmap (its gradient is that of the bilinear lookup)"),
+    ({"normal_map": {"texture": "checkerboard"}, "bump_scale": 2.0},
+     "materials.m.bump_scale: bump_scale belongs to a bump_map"),
+    ({"normal_map": 0.5}, "materials.m.normal_map: expected a texture table, got a number"),
+])
+def test_toml_maps_that_are_refused(given, words):
+    """A TOML material's maps are checked naming the key."""
+    with pytest.raises(tracer.errors.InputError) as caught:
+        tracer.load_scene(dict(TOML_SCENE, materials={"m": dict(type="diffuse", reflectance=GREY, **given)}))
+    assert words in str(caught.value)
+
+
+def test_a_toml_map_on_glass_is_refused():
+    with pytest.raises(tracer.errors.InputError) as caught:
+        tracer.load_scene(dict(TOML_SCENE, materials={"m": {"type": "dielectric",
+                                                             "normal_map": {"texture": "checkerboard"}}}))
+    assert ("materials.m.normal_map: a normal_map on dielectric is not supported (tracer tilts the frame of "
+            "materials that only reflect)") in str(caught.value)

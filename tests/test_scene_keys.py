@@ -30,7 +30,12 @@ def every_key_scene(tmp_path):
             "checks": {"type": "diffuse", "reflectance": {"texture": "checkerboard", "color0": 0.9,
                                                           "color1": [0.1, 0.2, 0.3], "to_uv": [[2, 0, 0], [0, 2, 0]]}},
             "image": {"type": "diffuse", "reflectance": {"texture": "bitmap", "file": "t.png", "raw": True,
-                                                         "filter": "nearest", "wrap": "clamp"}}},
+                                                         "filter": "nearest", "wrap": "clamp"}},
+            "tilted": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5],
+                       "normal_map": {"texture": "bitmap", "file": "t.png", "raw": True}},
+            "bumpy": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5],
+                      "bump_map": {"texture": "bitmap", "file": "t.png"}, "bump_scale": 0.1,
+                      "flip_invalid_normals": False, "use_shadowing_function": False}},
         "shapes": [
             {"type": "quad", "origin": [0, 0, 0], "edge1": [1, 0, 0], "edge2": [0, 0, -1],
              "uv": [[0, 0], [2, 0], [2, 2], [0, 2]], **common},
@@ -51,7 +56,8 @@ def every_key_scene(tmp_path):
 def test_every_declared_key_is_read(tmp_path):
     doc = every_key_scene(tmp_path)
     given = {"top level": set(doc), "[render]": set(doc["render"]), "[camera]": set(doc["camera"]),
-             "[materials.NAME]": {"type", "twosided", "opacity"},
+             "[materials.NAME]": {"type", "twosided", "opacity", "normal_map", "bump_map", "bump_scale",
+                                  "flip_invalid_normals", "use_shadowing_function"},
              "a material parameter's texture": {key for m in doc["materials"].values()
                                                 for value in m.values() if isinstance(value, dict) for key in value}}
     for shape in doc["shapes"]:

@@ -80,6 +80,15 @@ MATERIAL = Section("[materials.NAME]", "One material; NAME is any TOML key, whic
     Key("opacity", "number in [0, 1] or a texture", "1", "the fraction of light the surface stops "
         "(Mitsuba's mask): a hit is passed through with probability 1 - opacity, a shadow ray "
         "carries that fraction on; not on an emitting shape"),
+    Key("normal_map", "a texture", "none", "the normal, 2 rgb - 1, in the shading frame whose x "
+        "axis is dp/du (Mitsuba's normalmap; usually a raw bitmap); not on a type that transmits"),
+    Key("bump_map", "a texture (a bilinear bitmap)", "none", "a height field whose gradient tilts "
+        "the shading frame (Mitsuba's bumpmap); not with normal_map"),
+    Key("bump_scale", "number", "1", "the bump map's gradient factor"),
+    Key("flip_invalid_normals", "boolean", "true", "with a map: a tilted normal facing away from "
+        "the viewer is mirrored about the shading normal"),
+    Key("use_shadowing_function", "boolean", "true", "with a map: the bump-terminator shadowing "
+        "term (Estevez et al. 2019)"),
 ))
 
 TEXTURE = Section("a material parameter's texture", "Any parameter the plug-in page marks "

@@ -23,7 +23,7 @@ from ..camera import Camera
 from ..errors import InputError
 from ..inputfiles import read_regular_file
 from ..record import MAX_SAMPLE_INDEX
-from ..textures import FILTERS, WRAPS, Texture, TextureTable, bind
+from ..textures import FILTERS, WRAPS, Perturbation, Texture, TextureTable, bind
 from ..textures.bitmap import read_texels
 from . import keys
 from .environment import Environment, rotation_problem
@@ -393,6 +393,9 @@ def _read_materials(path: str, table: Any, base: Path, textures: TextureTable) -
                 _Reader(path, f"materials.{name}.opacity", m.raw("opacity"), keys.TEXTURE), base, images)))
         else:
             opacity.append(m.number("opacity", default=1.0, lo=0.0, hi=1.0))
+        tilt = _read_perturbation(path, name, m, kind, base, images)
+        if tilt is not None:
+            textures.bind_perturbation(row, tilt)
         m.done()
         try:
             values = bind(textures, row, kind, values, path)
@@ -621,6 +624,36 @@ def _read_shape(r: _Reader, base: Path, material_names: list[str], geometry: _Ge
             return
     r.done()
     geometry.add(shape_type, record, vertices, faces, material, emission, corner_uv=corner_uv)
+
+
+def _read_perturbation(path: str, name: str, m: _Reader, kind, base: Path,
+                       images: dict[tuple[str, bool], np.ndarray]) -> Perturbation | None:
+    """Material ``name``'s ``normal_map`` or ``bump_map`` (``keys.MATERIAL``) as a
+    :class:`Perturbation`, or None without either."""
+    given = [key for key in ("normal_map", "bump_map") if m.has(key)]
+    if not given:
+        for key in ("bump_scale", "flip_invalid_normals", "use_shadowing_function"):
+            if m.has(key):
+                m.fail("needs a normal_map or a bump_map", key)
+        return None
+    if len(given) == 2:
+        m.fail("give a normal_map or a bump_map, not both", "bump_map")
+    key = given[0]
+    if getattr(kind, "transmits", False) or kind.name in ("dielectric", "thindielectric"):
+        m.fail(f"a {key} on {kind.name} is not supported (tracer tilts the frame of materials that only "
+               "reflect)", key)
+    table = m.raw(key)
+    if not isinstance(table, dict):
+        m.fail(f"expected a texture table, got {_kind(table)}", key)
+    texture = _read_texture(_Reader(path, f"materials.{name}.{key}", table, keys.TEXTURE), base, images)
+    if key == "bump_map" and (texture.kind != "bitmap" or texture.filter != "bilinear"):
+        m.fail("a bump map is a bilinear bitmap (its gradient is that of the bilinear lookup)", key)
+    scale = m.number("bump_scale", default=1.0, lo=-1e6, hi=1e6) if key == "bump_map" else 1.0
+    if key == "normal_map" and m.has("bump_scale"):
+        m.fail("bump_scale belongs to a bump_map", "bump_scale")
+    return Perturbation("normalmap" if key == "normal_map" else "bumpmap", texture, scale,
+                        m.boolean("flip_invalid_normals", default=True),
+                        m.boolean("use_shadowing_function", default=True))
 
 
 def _read_texture(r: _Reader, base: Path, images: dict[tuple[str, bool], np.ndarray]) -> Texture:
