@@ -22,7 +22,7 @@ from tracer import cli
 from tracer.estimator import DirectLighting
 from tracer.strategy import Strategy
 from tracer.textures import Texture, TextureTable
-from tracer.textures.lookup import evaluate_one
+from tracer.textures.lookup import evaluate_one, uv_at
 from tracer.textures.shading_frames import factor, height_gradient, perturbed, uv_partials
 
 MITSUBA = tracer.__path__[0] + "/scenes/mitsuba"
@@ -38,8 +38,10 @@ def test_the_height_gradient_is_the_derivative_of_the_lookup():
     """Inside one cell of texel centres a bilinear lookup is bilinear in (su, sv), so a central
     difference of step h there equals its derivative up to rounding: values of order 1 looked
     up in float64 differ by about 1e-16, divided by 2h = 2e-6 that is 1e-10, and the gradient is
-    of order 10-100 (a texel is 1/12 wide). The to_uv map has a rotation and a shear, so a
-    gradient taken before it, or with its transpose missing, is off by far more than 1e-7."""
+    of order 10-100 (a texel is 1/12 wide). The to_uv map has a rotation and a shear on a
+    texture that is not square, so a gradient taken before it, with its transpose missing, or
+    scaled by the resolution after it (Mitsuba 3.9.1's order, which is not the derivative here:
+    shading_frames.height_gradient), is off by far more than 1e-7."""
     rng = np.random.default_rng(5)
     texture = Texture("bitmap", pixels=rng.random((7, 12, 3)).astype(np.float32), wrap="repeat")
     texture.to_uv = np.array([[1.3, 0.4, 0.1], [-0.5, 0.9, 0.3]])
@@ -134,6 +136,9 @@ def test_a_spheres_uv_partials_are_the_derivatives_of_its_coordinates(tmp_path):
     h = 1e-6
     for u, v in [(0.1, 0.3), (0.6, 0.55), (0.93, 0.8)]:
         x = point(u, v)
+        # the parameterization differenced here is the one lookups use (to float64 rounding)
+        looked_up = uv_at(surfaces.textures, surfaces.hit_table, p, p, tuple(x))
+        assert looked_up == pytest.approx((u, v), abs=1e-12)
         face = tuple((x - center) / radius)
         dp_du, dp_dv = uv_partials(surfaces.textures, surfaces.hit_table, p, p, tuple(x), face)
         np.testing.assert_allclose(dp_du, (point(u + h, v) - point(u - h, v)) / (2 * h), atol=1e-7)
@@ -206,9 +211,13 @@ def test_flip_invalid_normals_mirrors_a_normal_facing_away(tmp_path):
         d = (math.sin(math.radians(70)), 0.0, -math.cos(math.radians(70)))
         results[flip] = perturbed(surfaces.textures, int(surfaces.hit_table[0, 15]), surfaces.hit_table,
                                   surfaces.first_sphere, surfaces.corner_normals, 0, x, d, normal)
-    reflects, tilted, *_ = results["true"]
+    reflects, tilted, _, _, _, a2 = results["true"]
     assert reflects
-    np.testing.assert_allclose(tilted, (-n[0], 0.0, n[2]), atol=1e-8)
+    # The texel is an rgb constant, stored in float32: its components are off by up to 3e-8
+    # (half a float32 ulp at 0.5 .. 1, doubled by 2 rgb - 1), hence 1e-7.
+    np.testing.assert_allclose(tilted, (-n[0], 0.0, n[2]), rtol=0, atol=1e-7)
+    # The shadowing term's a² = min(tan²(60°) / 8, 1) = 3/8, from the tilted normal's angle.
+    assert a2 == pytest.approx(3 / 8, rel=1e-6)
     assert not results["false"][0]
 
 
@@ -231,7 +240,16 @@ BUMPS = f'<texture type="bitmap"><string name="filename" value="{MITSUBA}/textur
     (f'<bsdf type="normalmap"><rgb name="normalmap" value="0.5, 0.5, 1"/><bsdf type="bumpmap">{BUMPS}'
      '<bsdf type="diffuse"/></bsdf></bsdf>',
      '<bsdf type="bumpmap"> in <bsdf type="normalmap">: a bumpmap inside a normalmap is not supported '
-     '(put a twosided outside the normalmap; give one map)'),
+     '(give one map)'),
+    ('<bsdf type="normalmap"><rgb name="normalmap" value="0.5, 0.5, 1"/><bsdf type="mask">'
+     '<bsdf type="diffuse"/></bsdf></bsdf>',
+     '<bsdf type="mask"> in <bsdf type="normalmap">: a mask inside a normalmap is not supported '
+     '(put the mask outside the normalmap)'),
+    (f'<bsdf type="bumpmap">{BUMPS}<bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>',
+     '<bsdf type="twosided"> in <bsdf type="bumpmap">: a twosided inside a bumpmap is not supported '
+     '(put the twosided outside the bumpmap)'),
+    ('<bsdf type="normalmap"><rgb name="normalmap" value="0.5, 0.5, 2"/><bsdf type="diffuse"/></bsdf>',
+     '<rgb name="normalmap"> in <bsdf type="normalmap">: normalmap: expected a number <= 1, got 2'),
     (f'<bsdf type="bumpmap"><float name="scale" value="1e9"/>{BUMPS}<bsdf type="diffuse"/></bsdf>',
      '<float name="scale"> in <bsdf type="bumpmap">: scale: expected a number <= 1e+06, got 1e+09'),
 ])
@@ -244,6 +262,21 @@ def test_normal_and_bump_maps_that_are_refused(tmp_path, capsys, inside, message
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
     assert err[0].startswith(f"tracer: error: {path}:") and err[0].endswith(message), err[0]
+
+
+def test_a_bump_map_on_a_disk_is_refused(tmp_path, capsys):
+    """tracer's disk is a fan of triangles whose dp/dv is the rim's everywhere (Mitsuba's
+    analytic disk has 2π r): a bump map's tilt would be wrong toward the centre, so it is
+    refused in one line; a normal map (which needs only dp/du's direction) is not."""
+    path = tmp_path / "scene.xml"
+    path.write_text(MASKED_XML.replace('"rectangle"', '"disk"').format(
+        inside=f'<bsdf type="bumpmap">{BUMPS}<bsdf type="diffuse"/></bsdf>'))
+    assert cli.main(["render", str(path), "-o", str(tmp_path / "out.exr")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith("a bumpmap on a disk is not supported (tracer's disk is a fan "
+                                              "of triangles, whose dp/dv is not the disk's)"), err
+    path.write_text(MASKED_XML.replace('"rectangle"', '"disk"').format(inside=FLAT))
+    assert tracer.load_scene(str(path)).textures.perturbations
 
 
 def test_an_obj_with_a_vertex_no_face_uses_keeps_its_normals(tmp_path):

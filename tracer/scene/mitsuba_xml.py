@@ -706,6 +706,12 @@ class _SceneReader:
             emission = self.area_radiance(emitter)
         if bsdfs:
             material = self.material(*bsdfs[0])
+            tilt = self.perturbations.get(material)
+            if p.type == "disk" and tilt is not None and tilt.kind == "bumpmap":
+                # Its fan's triangles carry the rim's dp/dv everywhere (Mitsuba's analytic disk
+                # has 2π r there): a bump map's tilt would be off toward the centre.
+                bsdfs[0][1].fail("a bumpmap on a disk is not supported (tracer's disk is a fan of "
+                                 "triangles, whose dp/dv is not the disk's)", p.element)
             if emitters and material in self.opacities:
                 bsdfs[0][1].fail("a mask on an emitting shape is not supported (tracer's emitters are "
                                  "opaque)", p.element)
@@ -926,9 +932,14 @@ class _SceneReader:
             if len(nested) != 1:
                 p.fail(f"{p.type} needs one nested bsdf, not {len(nested)}")
             inner, naming = nested[0]
-            if inner.attrs.get("type") in ("normalmap", "bumpmap", "twosided"):
-                naming.fail(f"a {shown(inner.attrs.get('type', ''))} inside a {p.type} is not supported "
-                            f"(put a twosided outside the {p.type}; give one map)", bsdf)
+            inside = inner.attrs.get("type")
+            advice = {"twosided": f"put the twosided outside the {p.type}",
+                      "mask": f"put the mask outside the {p.type}",
+                      "normalmap": "give one map", "bumpmap": "give one map"}
+            if inside in advice:
+                # Mitsuba applies the map to every lobe below it (a mask's pass-through too) and
+                # mirrors a twosided's back differently below a map than above it.
+                naming.fail(f"a {inside} inside a {p.type} is not supported ({advice[inside]})", bsdf)
             p.done()
             inner_id, plugin, type_name, values, twosided, opacity, _ = self.material_parts(inner, sides)
             if getattr(materials.TYPES[type_name], "transmits", False) or type_name in _DIELECTRICS:
@@ -969,7 +980,8 @@ class _SceneReader:
             if texture is None:
                 if not p.has("normalmap"):
                     p.fail("missing property 'normalmap' (a texture or an rgb)")
-                texture = _constant_texture(p.color("normalmap", 0.0, "other", lo=-math.inf),
+                # An rgb is Mitsuba's srgb texture, which takes components in [0, 1] only.
+                texture = _constant_texture(p.color("normalmap", 0.0, "other", lo=0.0, hi=1.0),
                                             p.props["normalmap"].where)
             scale = 1.0
         else:

@@ -99,9 +99,13 @@ def uv_partials(textures, hit_table, first_sphere: int, p: int, x, face_normal):
 
 @jit
 def height_gradient(textures, t: int, u: float, v: float):
-    """(df/du, df/dv) of texture ``t``'s one-number value at (u, v), as Mitsuba's bitmap
-    ``eval_1_grad``: the derivative of the bilinear blend of the four texels' luminances, times
-    the resolution, through ``to_uv``'s linear part; 0 for a nearest lookup or a checkerboard."""
+    """(df/du, df/dv) of texture ``t``'s one-number value at (u, v): the derivative of the
+    bilinear blend of the four texels' luminances, by the chain rule through the resolution and
+    ``to_uv``'s linear part A; 0 for a nearest lookup or a checkerboard. Mitsuba 3.9.1's bitmap
+    ``eval_1_grad`` multiplies by the resolution after A's transpose instead of before, which is
+    the same where A is diagonal or the texture square, and otherwise not the derivative (a
+    rotated ``to_uv`` on a 2:1 texture gives a gradient off by up to 2x): tracer keeps the
+    derivative, so a bump map under such a ``to_uv`` renders unlike Mitsuba's."""
     info = textures.info
     if int(info[t, KIND]) != BITMAP or int(info[t, FILTER]) != BILINEAR:
         return 0.0, 0.0
