@@ -181,6 +181,29 @@ def _primitive_at(scene, x: np.ndarray) -> int:
     raise AssertionError(f"no triangle holds {x}")
 
 
+@pytest.mark.parametrize("flip", ["false", "true"])
+def test_a_mesh_without_coordinates_keeps_its_files_corner_order_when_turned(tmp_path, flip):
+    # Without texture coordinates Mitsuba's (u, v) is (b1, b2) of the file's corners, whichever
+    # side flip_normals makes the front; tracer turns the winding of a flipped mesh, so its
+    # turned corners must carry the file order's coordinates (they had the turned order's).
+    # The point v0 + 0.3 (v1 - v0) + 0.2 (v2 - v0) of the file's triangle has (0.3, 0.2), to
+    # float64 rounding of a plane intersection and barycentrics (1e-12).
+    (tmp_path / "tri.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                                      "property float y\nproperty float z\nelement face 1\n"
+                                      "property list uchar int vertex_indices\nend_header\n"
+                                      "-1 -1 0\n1 -1 0\n-1 1 0\n3 0 1 2\n")
+    path = tmp_path / "s.xml"
+    path.write_text(SHAPE_SCENE.format(shape="ply").replace(
+        '<shape type="ply">', f'<shape type="ply"><string name="filename" value="tri.ply"/>'
+        f'<boolean name="flip_normals" value="{flip}"/>'))
+    scene = tracer.load_scene(path)
+    textures = scene.textures.arrays(len(scene.materials.kind), scene.corner_uv, scene.sphere_frame)
+    v0, v1, v2 = np.array([-1.0, -1, 0]), np.array([1.0, -1, 0]), np.array([-1.0, 1, 0])
+    x = v0 + 0.3 * (v1 - v0) + 0.2 * (v2 - v0)
+    u, v = lookup.uv_at(textures, scene.hit_table, scene.triangle_count, 0, tuple(x))
+    assert abs(u - 0.3) < 1e-12 and abs(v - 0.2) < 1e-12, (u, v)
+
+
 def test_a_rotated_sphere_takes_its_coordinates_in_its_own_frame(tmp_path):
     # Rotated 90 degrees about z, the sphere's local x axis is the world's y: the world point
     # (0, 1, 0) has Mitsuba's (u, v) of the local point (1, 0, 0), (0, 1/2).

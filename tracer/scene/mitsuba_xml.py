@@ -49,7 +49,7 @@ from .mitsuba_document import (
 from .mitsuba_upgrade import upgrade_document
 from .model import Scene
 from .serialized import read_serialized
-from .toml_reader import MAX_COORDINATE, MAX_RADIANCE, MAX_SIDE, _Geometry, check_resolution
+from .toml_reader import MAX_COORDINATE, MAX_RADIANCE, MAX_SIDE, NO_UV, _Geometry, check_resolution
 
 # Mitsuba 3.9.1's defaults (checked by loading scenes and reading them back with mi.traverse).
 FILM_SIZE = (768, 576)
@@ -677,6 +677,10 @@ class _SceneReader:
                 corner_uv[:, 1::2] = 1.0 - corner_uv[:, 1::2]
             if flip != (mirrored and file_normals):  # the corners were turned with the winding
                 corner_uv = corner_uv.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 6)
+        elif flip != (mirrored and file_normals):
+            # Without coordinates Mitsuba's (u, v) is the barycentrics of the file's corner order:
+            # the turned corners carry them explicitly (the default would be of the turned order).
+            corner_uv = np.tile(NO_UV.reshape(3, 2)[::-1].reshape(6), (len(faces), 1))
         attributes = mesh.attributes
         if flip != (mirrored and file_normals):
             attributes = {name: values[:, ::-1] for name, values in attributes.items()}
