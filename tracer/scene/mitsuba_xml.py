@@ -28,7 +28,7 @@ from ..camera import Camera
 from ..errors import InputError, one_line, shown
 from ..materials import conductor, plastic
 from ..record import MAX_SAMPLE_INDEX
-from ..textures import FILTERS, LUMINANCE, WRAPS, Perturbation, Texture, bind
+from ..textures import FILTERS, LUMINANCE, WRAPS, Perturbation, Texture, bind, tiltable
 from ..textures.bitmap import read_texels
 from . import spectrum
 from .environment import Environment, rotation_problem
@@ -946,7 +946,7 @@ class _SceneReader:
                 naming.fail(f"a {inside} inside a {p.type} is not supported ({advice[inside]})", bsdf)
             p.done()
             inner_id, plugin, type_name, values, twosided, opacity, _ = self.material_parts(inner, sides)
-            if getattr(materials.TYPES[type_name], "transmits", False) or type_name in _DIELECTRICS:
+            if not tiltable(materials.TYPES[type_name]):
                 naming.fail(f"a {p.type} around {type_name} is not supported (tracer tilts the frame of "
                             "materials that only reflect)", bsdf)
             return ident or inner_id, plugin, type_name, values, twosided, opacity, tilt

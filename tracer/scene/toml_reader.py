@@ -23,7 +23,7 @@ from ..camera import Camera
 from ..errors import InputError
 from ..inputfiles import read_regular_file
 from ..record import MAX_SAMPLE_INDEX
-from ..textures import FILTERS, WRAPS, Perturbation, Texture, TextureTable, bind
+from ..textures import FILTERS, WRAPS, Perturbation, Texture, TextureTable, bind, tiltable
 from ..textures.bitmap import read_texels
 from . import keys
 from .environment import Environment, rotation_problem
@@ -639,7 +639,7 @@ def _read_perturbation(path: str, name: str, m: _Reader, kind, base: Path,
     if len(given) == 2:
         m.fail("give a normal_map or a bump_map, not both", "bump_map")
     key = given[0]
-    if getattr(kind, "transmits", False) or kind.name in ("dielectric", "thindielectric"):
+    if not tiltable(kind):
         m.fail(f"a {key} on {kind.name} is not supported (tracer tilts the frame of materials that only "
                "reflect)", key)
     table = m.raw(key)

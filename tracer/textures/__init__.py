@@ -152,6 +152,17 @@ class Perturbation:
     shadowing: bool = True
 
 
+# tracer's material types with a delta transmission (``MaterialType.transmits`` marks those
+# whose transmission has a density).
+_DELTA_TRANSMITTERS = frozenset({"dielectric", "thindielectric"})
+
+
+def tiltable(kind) -> bool:
+    """Whether a normal or bump map may wrap material type ``kind`` (a ``MaterialType``): one
+    that only reflects. tracer's tilted frame masks and shadows reflected samples only."""
+    return not (getattr(kind, "transmits", False) or kind.name in _DELTA_TRANSMITTERS)
+
+
 @dataclass(frozen=True)
 class Binding:
     """Texture ``texture`` feeds parameter ``param`` (``size`` columns from ``column``) of the

@@ -194,9 +194,7 @@ def perturbed(textures, row: int, hit_table, first_sphere: int, corner_normals, 
     else:
         s_tilted, t_tilted = basis(n_tilted)
     wo_tilted = to_local(s_tilted, t_tilted, n_tilted, scale(-1.0, d))
-    if not wo_tilted[2] > 0.0:
-        return False, n_tilted, s_tilted, t_tilted, wo_tilted, a2
-    return True, n_tilted, s_tilted, t_tilted, wo_tilted, a2
+    return wo_tilted[2] > 0.0, n_tilted, s_tilted, t_tilted, wo_tilted, a2
 
 
 @jit
