@@ -6,7 +6,8 @@ Run with a Python that has Mitsuba 3.9.1 (``pip install mitsuba==3.9.1``)::
 
 It loads small scenes in the ``scalar_rgb`` variant and prints, as JSON: the ray directions
 of perspective sensors at film positions (every ``fov_axis``, ``focal_length``, look-at,
-matrix and mirrored transforms, a 2:1 and a 9:16 film), the ``to_world`` matrices of
+matrix and mirrored transforms, a 2:1 and a 9:16 film), the origins and directions of
+orthographic and thin-lens sensors' rays at film positions and lens samples, the ``to_world`` matrices of
 transform snippets, the linear sRGB Mitsuba makes of spectra (reflectance, eta, emitter) and
 the side each shape emits from after mirroring and flipping. The test file holds the numbers
 this printed (tracer's tests do not need Mitsuba).
@@ -48,6 +49,21 @@ CAMERAS = {
 }
 FILM_POSITIONS = [(0.5, 0.5), (0.1, 0.2), (0.9, 0.7)]
 
+# Sensors with a lens or parallel rays: name -> (type, properties, to_world operations, width,
+# height); their rays' origins and directions at FILM_POSITIONS x APERTURE_SAMPLES. The thin
+# lenses' near_clip is tiny: Mitsuba starts their rays on the near plane, tracer at the lens.
+LENS_CAMERAS = {
+    "orthographic": ("orthographic", '<float name="near_clip" value="0.7"/>',
+                     '<scale x="1.7" y="1.7" z="1.3"/>' + LOOKAT, 200, 100),
+    "orthographic_mirrored": ("orthographic", "", '<scale x="-1.7" y="1.7"/>' + LOOKAT, 160, 120),
+    "thinlens": ("thinlens", '<float name="aperture_radius" value="0.3"/><float name="focus_distance" '
+                 'value="2.5"/><float name="near_clip" value="1e-6"/>' + _fov(40), LOOKAT, 200, 100),
+    "thinlens_mirrored": ("thinlens", '<float name="aperture_radius" value="0.3"/><float name="near_clip" '
+                          'value="1e-6"/><float name="focus_distance" value="2.5"/>' + _fov(40, "y"),
+                          '<scale x="-1"/>' + LOOKAT, 160, 120),
+}
+APERTURE_SAMPLES = [(0.5, 0.5), (0.9, 0.3), (0.2, 0.75)]
+
 TRANSFORMS = [
     '<translate x="1"/><scale value="2"/>',
     '<scale value="2"/><translate x="1"/>',
@@ -83,6 +99,20 @@ def cameras() -> dict:
         rays = [sensor.sample_ray(0.0, 0.5, mi.Point2f(*uv), mi.Point2f(0.5, 0.5))[0]
                 for uv in FILM_POSITIONS]
         out[name] = [[round(float(c), 7) for c in ray.d] for ray in rays]
+    return out
+
+
+def lens_cameras() -> dict:
+    out = {}
+    for name, (kind, props, ops, w, h) in LENS_CAMERAS.items():
+        scene = load(f'<sensor type="{kind}">{props}<transform name="to_world">{ops}</transform>'
+                     f'<film type="hdrfilm"><integer name="width" value="{w}"/>'
+                     f'<integer name="height" value="{h}"/></film></sensor>')
+        sensor = scene.sensors()[0]
+        rays = [sensor.sample_ray(0.0, 0.5, mi.Point2f(*uv), mi.Point2f(*lens))[0]
+                for uv in FILM_POSITIONS for lens in APERTURE_SAMPLES]
+        out[name] = [[[round(float(c), 7) for c in ray.o], [round(float(c), 7) for c in ray.d]]
+                     for ray in rays]
     return out
 
 
@@ -150,7 +180,8 @@ def fronts(folder: str) -> dict:
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as folder:
-        facts = {"version": mi.__version__, "cameras": cameras(), "transforms": transforms(),
+        facts = {"version": mi.__version__, "cameras": cameras(), "lens_cameras": lens_cameras(),
+                 "transforms": transforms(),
                  "spectra": spectra(), "fronts": fronts(folder)}
     print(json.dumps(facts, indent=1))
 

@@ -328,8 +328,7 @@ def test_film_and_sampler_defaults_and_spp(tmp_path):
 
 
 @pytest.mark.parametrize("sensor, words", [
-    ('<sensor type="thinlens"/>', ["sensor 'thinlens' is not supported", "depth of field"]),
-    ('<sensor type="orthographic"/>', ["orthographic"]),
+    ('<sensor type="radiancemeter"/>', ["sensor 'radiancemeter' is not supported", "thinlens and orthographic"]),
     ('<sensor type="perspective"><float name="fov" value="40"/><string name="focal_length" value="20mm"/>'
      '</sensor>', ["fov or focal_length"]),
     # Mitsuba: "Found 1 unreferenced property ... string fov_axis" with a focal length

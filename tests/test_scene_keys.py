@@ -10,7 +10,9 @@ from tracer.errors import InputError
 from tracer.scene import keys
 
 CAMERA = {"origin": [0, 1, 4], "target": [0, 1, 0], "up": [0, 1, 0], "fov": 40, "width": 8, "height": 6,
-          "mirrored": False}
+          "mirrored": False, "projection": "perspective", "aperture_radius": 0.1, "focus_distance": 4.0}
+# The orthographic camera's own key (its projection excludes fov and the lens).
+ORTHOGRAPHIC = {"origin": [0, 1, 4], "target": [0, 1, 0], "projection": "orthographic", "view_width": 3.0}
 
 
 def every_key_scene(tmp_path):
@@ -55,7 +57,7 @@ def every_key_scene(tmp_path):
 
 def test_every_declared_key_is_read(tmp_path):
     doc = every_key_scene(tmp_path)
-    given = {"top level": set(doc), "[render]": set(doc["render"]), "[camera]": set(doc["camera"]),
+    given = {"top level": set(doc), "[render]": set(doc["render"]), "[camera]": set(CAMERA) | set(ORTHOGRAPHIC),
              "[materials.NAME]": {"type", "twosided", "opacity", "normal_map", "bump_map", "bump_scale",
                                   "flip_invalid_normals", "use_shadowing_function"},
              "a material parameter's texture": {key for m in doc["materials"].values()
@@ -68,6 +70,7 @@ def test_every_declared_key_is_read(tmp_path):
     for section in keys.SECTIONS:  # the scene above really gives every declared key
         assert set(section.names()) == given[section.header], section.header
     load_scene(doc, base_dir=tmp_path)
+    assert load_scene({**doc, "camera": ORTHOGRAPHIC}, base_dir=tmp_path).camera.view_width == 3.0
 
 
 @pytest.mark.parametrize("table, typo, meant, message", [

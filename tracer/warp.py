@@ -60,6 +60,21 @@ def cosine_hemisphere_pdf(z: float) -> float:
 
 
 @jit
+def concentric_disk(u0: float, u1: float):
+    """Uniform point (x, y) of the unit disk, Shirley and Chiu's concentric map ("A low
+    distortion map between disk and square", 1997): squares around the centre go to rings, so
+    strata of the square stay compact on the disk. pdf 1 / pi (area)."""
+    a, b = 2.0 * u0 - 1.0, 2.0 * u1 - 1.0
+    if a == 0.0 and b == 0.0:
+        return 0.0, 0.0
+    if abs(a) > abs(b):
+        r, phi = a, 0.25 * math.pi * (b / a)
+    else:
+        r, phi = b, 0.5 * math.pi - 0.25 * math.pi * (a / b)
+    return r * math.cos(phi), r * math.sin(phi)
+
+
+@jit
 def triangle_barycentric(u0: float, u1: float):
     """Uniform barycentrics ``(b1, b2)``; the point is ``v0 + b1 (v1 - v0) + b2 (v2 - v0)``.
     Heitz's 2019 low-distortion square-to-triangle map: the smaller coordinate is offset to fold
@@ -184,6 +199,15 @@ def sample_triangle_barycentric(u: np.ndarray) -> np.ndarray:
     out = np.empty((len(u), 2))
     for i in range(len(u)):
         out[i, 0], out[i, 1] = triangle_barycentric(u[i, 0], u[i, 1])
+    return out
+
+
+@jit
+def sample_concentric_disk(u: np.ndarray) -> np.ndarray:
+    """``u (n, 2)`` -> uniform points of the unit disk ``(n, 2)`` (area pdf = 1 / pi)."""
+    out = np.empty((len(u), 2))
+    for i in range(len(u)):
+        out[i, 0], out[i, 1] = concentric_disk(u[i, 0], u[i, 1])
     return out
 
 

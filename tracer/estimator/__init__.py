@@ -39,12 +39,13 @@ from __future__ import annotations
 import numpy as np
 
 from .. import mis, plugins, samplers, tuning
-from ..camera import lane_directions
+from ..camera import lane_camera_rays
 from ..embree import RayCaster
 from ..geometry import SceneRays
 from ..kernels import Build, FeatureSet, shared_builds
 from ..kernels import build as build_kernels
 from ..lights import LightSampler, technique_names
+from ..samplers import dimensions
 from ..scene import Scene
 from ..strategy import Strategy
 from ..tuning import Tuning
@@ -125,8 +126,16 @@ class DirectLighting:
     def camera_rays(self, sampler: samplers.SamplerParams, pixel: np.ndarray,
                     sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The camera rays of lanes ``(pixel[i], sample[i])`` (``Camera.lane_rays``)."""
-        directions = self.build(sampler).function(lane_directions)
-        return self.scene.camera.lane_rays(directions, sampler, pixel, sample)
+        rays = self.build(sampler).function(lane_camera_rays)
+        return self.scene.camera.lane_rays(rays, sampler, pixel, sample, self.lens_dimension)
+
+    @property
+    def lens_dimension(self) -> int:
+        """The sampler dimension of a thin lens's point: the pair after the most light and
+        direction samples a camera sample takes (``samplers.dimensions``)."""
+        plan = self.plan
+        directions = max(plan.n_dir, plan.light_slots) if plan.adaptive else plan.n_dir
+        return dimensions.lens(plan.light_slots, directions)
 
     def radiance(self, origins: np.ndarray, dirs: np.ndarray, seed: int = 0, pixel: np.ndarray | None = None,
                  sample: np.ndarray | None = None, sampler: str = "independent") -> np.ndarray:
@@ -216,7 +225,8 @@ class DirectLighting:
                        tuned, out), template=estimator_kernels.shade),
                  Call((radiance, self.surfaces, tables, self.plan, tuned, shadow, np.zeros(0, dtype=np.bool_),
                        direction, found, lane_stats), template=estimator_kernels.gather),
-                 Call((sampler, lanes, lanes, *self.scene.camera.screen), template=lane_directions)]
+                 Call((sampler, lanes, lanes, self.lens_dimension, *self.scene.camera.screen),
+                      template=lane_camera_rays)]
         if self.combiner.resamples:
             calls.append(Call((radiance, self.surfaces, tables, self.plan, direction, found, shadow,
                                reservoirs),

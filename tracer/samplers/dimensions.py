@@ -16,7 +16,11 @@ pair                    decision                                      dimensions
 3 + 2 j                 light sample j: which light; unused           6 + 4 j, (7 + 4 j)
 2 + 2 N + 2 j           direction sample j (N light samples)          4 + 4 N + 4 j, + 1
 3 + 2 N + 2 j           direction sample j: which lobe; unused        6 + 4 N + 4 j, (+ 1)
+2 + 2 N + 2 M           a thin lens's point (M direction samples)     4 + 4 N + 4 M, + 1
 ======================  ===========================================  =======================
+
+The lens takes the pair after every other decision, so that a render without one keeps the
+dimensions (and so the bits) it had before thin lenses existed.
 
 1-D decisions take the first dimension of a pair of their own and leave the second unused,
 which costs nothing for counter-based samplers and keeps each pair a clean 2-D point set.
@@ -55,3 +59,9 @@ def direction(n_light: int, j: int) -> int:
 def lobe_choice(n_light: int, j: int) -> int:
     """The dimension that chooses the material lobe of direction sample ``j``."""
     return _FIRST_LIGHT + _PER_LIGHT * n_light + _PER_DIRECTION * j + 2
+
+
+def lens(n_light: int, n_direction: int) -> int:
+    """First of the two dimensions of a thin lens's point after ``n_light`` light and
+    ``n_direction`` direction samples (from Python: the camera's kernel takes it as an argument)."""
+    return _FIRST_LIGHT + _PER_LIGHT * n_light + _PER_DIRECTION * n_direction

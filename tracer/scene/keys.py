@@ -61,12 +61,22 @@ RENDER = Section("[render]", "Defaults of `tracer render`; its flags win. `refer
     Key("sampler", "string", "independent", "where the random numbers come from: a sampler name"),
 ))
 
-CAMERA = Section("[camera]", "The pinhole camera; a pixel is the plain mean of its samples (a box "
-                 "filter).", (
-    Key("origin", VEC3, REQUIRED, "eye position"),
+CAMERA = Section("[camera]", "The camera: a pinhole, a thin lens or an orthographic projection; a "
+                 "pixel is the plain mean of its samples (a box filter).", (
+    Key("origin", VEC3, REQUIRED, "eye position (orthographic: the centre of the film, where rays "
+        "start)"),
     Key("target", VEC3, REQUIRED, "a point the camera looks at; must differ from origin"),
     Key("up", VEC3, "[0, 1, 0]", "not zero, not parallel to target - origin"),
-    Key("fov", "number in (0, 179]", REQUIRED, "vertical field of view in degrees"),
+    Key("projection", "string", "\"perspective\"", "perspective or orthographic (parallel rays "
+        "along target - origin)"),
+    Key("fov", "number in (0, 179]", "required (perspective)", "vertical field of view in degrees; "
+        "perspective only"),
+    Key("view_width", "number > 0", "required (orthographic)", "the width of an orthographic film in "
+        "scene units; its height follows the aspect ratio"),
+    Key("aperture_radius", "number >= 0", "0", "perspective: the radius of a thin lens in scene units "
+        "(0: a pinhole); depth of field"),
+    Key("focus_distance", "number > 0", "required with a lens", "the distance along the view to the "
+        "plane in focus"),
     Key("width", "integer 1 .. 32768", "256", "pixels; --width replaces it"),
     Key("height", "integer 1 .. 32768", "256", "pixels; --height replaces it"),
     Key("mirrored", "boolean", "false", "the image's x axis runs the other way (a Mitsuba sensor "

@@ -341,10 +341,9 @@ class _SceneReader:
 
     def camera(self, element: Element) -> Camera:
         p = self.plugin(element)
-        if p.type != "perspective":
-            hint = {"thinlens": " (depth of field: use a perspective sensor)",
-                    "orthographic": " (tracer's camera is a pinhole)"}.get(p.type, "")
-            p.fail(f"sensor '{shown(p.type)}' is not supported{hint}; tracer reads perspective")
+        if p.type not in ("perspective", "thinlens", "orthographic"):
+            p.fail(f"sensor '{shown(p.type)}' is not supported; tracer reads perspective, thinlens and "
+                   "orthographic")
         width, height = FILM_SIZE
         films = p.nested("film")
         if len(films) > 1:
@@ -356,29 +355,42 @@ class _SceneReader:
             samplers[1][1].fail("a sensor has one sampler", element)
         if samplers:
             self.sampler(samplers[0][0])
+        # Mitsuba's defaults (ProjectiveCamera, src/render/sensor.cpp). An orthographic ray starts
+        # on the near plane, which tracer obeys; near and far planes of the others are noted.
+        near_clip = p.float("near_clip", 1e-2, lo=0.0, lo_open=True)
+        far_clip = p.float("far_clip", 1e4, lo=0.0, lo_open=True)
         for name in ("near_clip", "far_clip"):
-            if p.has(name):
-                value = p.float(name, 0.0, lo=0.0, lo_open=True)
-                self.notes.append(f"{name} {value:g}")
+            if p.has(name) and not (p.type == "orthographic" and name == "near_clip"):
+                self.notes.append(f"{name} {p.float(name, 0.0):g}")
         for name in ("shutter_open", "shutter_close"):  # no motion in a tracer scene: no effect
             p.float(name, 0.0, lo=0.0)
         # Mitsuba's projective cameras read the focal distance (ProjectiveCamera in
-        # src/render/sensor.cpp); a pinhole's image does not depend on it. (aperture_radius is
-        # the thin lens's: Mitsuba refuses it here too, as an unread property.)
-        p.float("focus_distance", 0.0)
+        # src/render/sensor.cpp), by default the far plane; a pinhole's image does not depend on
+        # it. (aperture_radius is the thin lens's, which requires it: Mitsuba refuses it
+        # elsewhere too, as an unread property.)
+        focus_distance = p.float("focus_distance", far_clip, lo=0.0, lo_open=True)
+        aperture = 0.0
+        if p.type == "thinlens":
+            if not p.has("aperture_radius"):
+                p.fail("a thinlens sensor needs aperture_radius (Mitsuba has no default)")
+            aperture = p.float("aperture_radius", 0.0, lo=0.0)
+            if focus_distance > MAX_COORDINATE:
+                p.fail(f"focus_distance {focus_distance:g} is beyond the coordinate range +-{MAX_COORDINATE:g}")
         for name in ("principal_point_offset_x", "principal_point_offset_y"):
-            if p.float(name, 0.0) != 0.0:
+            if p.type != "orthographic" and p.float(name, 0.0) != 0.0:
                 p.props[name].fail("an off-centre principal point is not supported", element)
 
         w, h = _resolution(width, height, self.width, self.height)
         check_resolution(w, h, element.where, "film width/height")
+        matrix = p.transform()
+        matrix = np.eye(4) if matrix is None else matrix
+        if p.type == "orthographic":
+            return self.orthographic(p, matrix, near_clip, int(w), int(h))
         tan_half = self.tan_half_vertical(p, w, h)
         fov = math.degrees(2.0 * math.atan(tan_half))
         if not 0.0 < fov <= 179.0:
             p.fail(f"the vertical field of view is {fov:.6g} degrees at {w}x{h}; tracer's camera takes up "
                    "to 179")
-        matrix = p.transform()
-        matrix = np.eye(4) if matrix is None else matrix
         linear = matrix[:3, :3]
         # A rigid rotation's entries lie in [-1, 1]; beyond 2 (1e308 overflowed the product with a
         # numpy warning) it is refused without forming M M^T.
@@ -394,7 +406,34 @@ class _SceneReader:
         # the transform keeps handedness (a mirror, det < 0, makes the image run the other way).
         mirrored = bool(np.linalg.det(linear) < 0.0)
         return Camera(origin.copy(), origin + linear[:, 2], linear[:, 1].copy(), fov, int(w), int(h),
-                      mirrored=mirrored)
+                      mirrored=mirrored, aperture_radius=aperture, focus_distance=focus_distance)
+
+    def orthographic(self, p: _Plugin, matrix: np.ndarray, near_clip: float, w: int, h: int) -> Camera:
+        """Mitsuba's ``orthographic`` sensor (src/sensors/orthographic.cpp, and
+        ``orthographic_projection`` in include/mitsuba/render/sensor.h): the film spans local
+        x in [-1, 1] and y in [-1 / aspect, 1 / aspect] on the plane z = near_clip, mapped by
+        ``to_world``, whose scale sets the film's size; rays run along local +z from there."""
+        linear = matrix[:3, :3]
+        if not np.all(np.isfinite(matrix)) or np.max(np.abs(linear)) > MAX_COORDINATE:
+            p.props["to_world"].fail("the camera's to_world is beyond the coordinate range", p.element)
+        lengths = np.linalg.norm(linear, axis=0)
+        if np.min(lengths) <= 0.0 or np.max(lengths) / np.min(lengths) > 1e12:
+            p.props["to_world"].fail("the camera's to_world collapses an axis", p.element)
+        axes = linear / lengths
+        if np.max(np.abs(axes.T @ axes - np.eye(3))) > RIGID_TOLERANCE:
+            p.props["to_world"].fail("the camera's to_world shears: tracer's orthographic camera takes a "
+                                     "rotation and scale", p.element)
+        if abs(lengths[0] - lengths[1]) > RIGID_TOLERANCE * lengths[0]:
+            p.props["to_world"].fail(f"the camera's to_world scales x and y differently ({lengths[0]:g}, "
+                                     f"{lengths[1]:g}): tracer's orthographic pixels are square", p.element)
+        origin = matrix[:3, 3] + near_clip * linear[:, 2]
+        if np.max(np.abs(origin)) > MAX_COORDINATE:
+            p.fail(f"the camera is beyond the coordinate range +-{MAX_COORDINATE:g}")
+        p.done()
+        # Local +x is the image's left, as for the perspective sensor (``camera``).
+        mirrored = bool(np.linalg.det(linear) < 0.0)
+        return Camera(origin, origin + axes[:, 2], axes[:, 1].copy(), 0.0, w, h, mirrored=mirrored,
+                      projection="orthographic", view_width=2.0 * float(lengths[0]))
 
     def tan_half_vertical(self, p: _Plugin, w: int, h: int) -> float:
         """tan(vertical fov / 2) from fov and fov_axis, or focal_length (a diagonal fov on

@@ -203,6 +203,10 @@ class Scene:
         add("camera", np.concatenate([cam.origin, cam.target, cam.up, [cam.fov]]), "<f8")
         if cam.mirrored:  # only then, so that the digests of other scenes stay as they were
             digest.update(b"camera mirrored\0")
+        if cam.projection != "perspective":  # likewise
+            add(f"camera {cam.projection}", [cam.view_width], "<f8")
+        if cam.thin_lens:
+            add("camera lens", [cam.aperture_radius, cam.focus_distance], "<f8")
         add("vertices", self.vertices, "<f4")
         add("faces", self.faces, "<i8")
         add("material", self.material, "<i4")

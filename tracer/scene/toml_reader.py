@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from .. import materials, sampler_choice, strategy
-from ..camera import Camera
+from ..camera import ORTHOGRAPHIC, PERSPECTIVE, PROJECTIONS, Camera
 from ..errors import InputError
 from ..inputfiles import read_regular_file
 from ..record import MAX_SAMPLE_INDEX
@@ -337,7 +337,21 @@ def _read_camera(r: _Reader, width: int | None, height: int | None) -> Camera:
     origin = _position(r, "origin")
     target = _position(r, "target")
     up = _position(r, "up", default=[0.0, 1.0, 0.0])
-    fov = r.number("fov", lo=0.0, lo_open=True, hi=179.0)
+    projection = r.string("projection", choices=PROJECTIONS, default=PERSPECTIVE)
+    lens = {}
+    if projection == ORTHOGRAPHIC:
+        for name in ("fov", "aperture_radius", "focus_distance"):
+            if r.has(name):
+                r.fail("an orthographic camera has no " + name, name)
+        fov = 0.0
+        lens["view_width"] = r.number("view_width", lo=0.0, lo_open=True, hi=MAX_COORDINATE)
+    else:
+        if r.has("view_width"):
+            r.fail("view_width is the orthographic camera's: a perspective camera has a fov", "view_width")
+        fov = r.number("fov", lo=0.0, lo_open=True, hi=179.0)
+        lens["aperture_radius"] = r.number("aperture_radius", default=0.0, lo=0.0, hi=MAX_COORDINATE)
+        if lens["aperture_radius"] > 0.0 or r.has("focus_distance"):
+            lens["focus_distance"] = r.number("focus_distance", lo=0.0, lo_open=True, hi=MAX_COORDINATE)
     w = r.number("width", default=256, lo=1, hi=MAX_SIDE, integer=True)
     h = r.number("height", default=256, lo=1, hi=MAX_SIDE, integer=True)
     mirrored = r.boolean("mirrored", default=False)
@@ -359,7 +373,8 @@ def _read_camera(r: _Reader, width: int | None, height: int | None) -> Camera:
     elif width is not None:
         w, h = width, height
     check_resolution(w, h, r.path, "camera.width/height")
-    return Camera(origin, target, up, fov, int(w), int(h), mirrored=bool(mirrored))
+    return Camera(origin, target, up, fov, int(w), int(h), mirrored=bool(mirrored), projection=projection,
+                  **{key: float(value) for key, value in lens.items()})
 
 
 def _read_materials(path: str, table: Any, base: Path, textures: TextureTable) -> materials.MaterialTable:

@@ -24,6 +24,7 @@ import numpy as np
 
 from .. import __version__, materials
 from ..atomic import atomic_write_many, bytes_writer, text_writer
+from ..camera import ORTHOGRAPHIC
 from ..errors import InputError
 from ..textures import BUMP_MAP, NORMAL_MAP
 from .icosphere import unit_icosphere
@@ -121,8 +122,15 @@ def scene_to_toml(scene: Scene, mesh_name, source: str | None = None) -> tuple[s
         lines.append("")
     cam = scene.camera
     lines += ["[camera]", f"origin = {_value(cam.origin)}", f"target = {_value(cam.target)}",
-              f"up = {_value(cam.up)}", f"fov = {_value(float(cam.fov))}", f"width = {int(cam.width)}",
-              f"height = {int(cam.height)}"]
+              f"up = {_value(cam.up)}"]
+    if cam.projection == ORTHOGRAPHIC:
+        lines += [f"projection = {_value(cam.projection)}", f"view_width = {_value(float(cam.view_width))}"]
+    else:
+        lines.append(f"fov = {_value(float(cam.fov))}")
+        if cam.thin_lens:
+            lines += [f"aperture_radius = {_value(float(cam.aperture_radius))}",
+                      f"focus_distance = {_value(float(cam.focus_distance))}"]
+    lines += [f"width = {int(cam.width)}", f"height = {int(cam.height)}"]
     if cam.mirrored:
         lines.append("mirrored = true")
     lines.append("")
