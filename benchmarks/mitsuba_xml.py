@@ -61,6 +61,7 @@ REFERENCES = {
     "normal_maps": (96, 72, 32, 256),
     "orthographic": (96, 64, 32, 256),
     "thinlens": (96, 64, 32, 256),
+    "projected_lights": (96, 64, 32, 256),
 }
 
 # tracer's side of the comparison (--compare and tests/test_mitsuba_agreement.py).

@@ -138,7 +138,7 @@ def test_delta_lights_convert_to_toml_and_back(scene, tmp_path):
 
 
 @pytest.mark.parametrize("light, message", [
-    ('<emitter type="spot"><texture type="checkerboard" name="texture"/></emitter>', "textured spot"),
+    ('<emitter type="spot"><texture type="checkerboard" name="texture"/></emitter>', "projects a bitmap texture"),
     ('<emitter type="spot"><transform name="to_world"><scale x="2"/></transform></emitter>',
      "distort the cone"),
     ('<emitter type="spot"><float name="cutoff_angle" value="0"/></emitter>', "cutoff_angle"),

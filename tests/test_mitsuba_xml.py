@@ -963,7 +963,7 @@ def test_emitter_defaults_and_forms(tmp_path):
 @pytest.mark.parametrize("body, words", [
     ('<emitter type="envmap"/>', ["missing property 'filename'"]),
     ('<emitter type="constant"/><emitter type="constant"/>', ["a second environment emitter"]),
-    ('<emitter type="projector"/>', ["projector lights"]),
+    ('<emitter type="radiancemeter"/>', ["emitter 'radiancemeter' is not supported", "projector"]),
     # Mitsuba: "Only one of the parameters 'position' and 'to_world' can be specified"
     ('<emitter type="point"><point name="position" value="1, 1, 1"/><transform name="to_world">'
      '<translate x="1"/></transform></emitter>', ["position or to_world"]),

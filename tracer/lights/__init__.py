@@ -74,7 +74,8 @@ class LightTables(NamedTuple):
 
     selection : the selection's tables (``tracer.lights.selections``), with ``pmf (K,)``.
     technique : (K,) int8 technique code of each candidate (``tracer.lights.techniques``).
-    rows : (K, ROW_WIDTH) float32, each candidate's parameters in its technique's columns.
+    rows : (K + A, ROW_WIDTH) float32, each candidate's parameters in its technique's columns,
+        then A rows that candidates link to (a point light's image: ``point.appendix``).
         float32 as the scene holds vertices and emission; a row is one 64-byte cache line,
         which light sampling reads at random.
     candidate_of_prim : (F + S,) int32, the candidate that scene primitive p (a triangle, or
@@ -193,6 +194,7 @@ def build_tables(scene, light_selection: str = "power",
     technique = np.zeros(count, dtype=np.int8)
     candidate_of_prim = np.full(len(scene.faces) + len(scene.spheres), -1, dtype=np.int32)
     first = 0
+    appended: list[np.ndarray] = []
     environment_candidate = -1
     for kind, record in zip(emitters.KINDS, ordered, strict=True):
         if not len(record):
@@ -207,8 +209,13 @@ def build_tables(scene, light_selection: str = "power",
             raise ValueError(f"light sampling {light_sampling!r} has no technique for the scene's "
                              f"{kind} emitters "
                              f"(it serves {', '.join(sorted(chosen)) or 'none'})")
-        block = plugin.functions().rows(record)
+        functions = plugin.functions()
+        block = functions.rows(record)
         rows[first:first + len(record), :block.shape[1]] = block
+        if hasattr(functions, "appendix"):  # rows after the candidates' (a light's image)
+            link, extra, column = functions.appendix(record, count + sum(len(a) for a in appended))
+            rows[first:first + len(record), column] = link
+            appended.append(extra)
         technique[first:first + len(record)] = plugin.code
         for prims in record.prims:
             candidate_of_prim[prims] = np.arange(first, first + len(record), dtype=np.int32)
@@ -220,6 +227,7 @@ def build_tables(scene, light_selection: str = "power",
     spheres = emitter_spheres(scene.vertices[scene.faces[tri]], scene.shape_of_triangle[tri],
                               scene.ray_epsilon, records["sphere"].spheres, records["sphere"].owner)
     environment = environment_light.table(scene.environment, environment_candidate)
+    rows = np.concatenate([rows, *appended]) if appended else rows
     return LightTables(tables, technique, np.ascontiguousarray(rows), candidate_of_prim, spheres,
                        environment), candidates.owner
 

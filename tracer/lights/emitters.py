@@ -92,13 +92,15 @@ class SphereEmitters(Emitters):
 @dataclass
 class PointEmitters(Emitters):
     """position (P, 3); intensity (P, 3) in W/sr; spot_axis (P, 3), cutoff, beam (P,) radians
-    (pi, pi: every way; ``Scene.point_cutoff``)."""
+    (pi, pi: every way; ``Scene.point_cutoff``); images (P,) the image each projects, or None
+    (``tracer.lights.projected_images``)."""
 
     position: np.ndarray = None  # type: ignore[assignment]
     intensity: np.ndarray = None  # type: ignore[assignment]
     spot_axis: np.ndarray = None  # type: ignore[assignment]
     cutoff: np.ndarray = None  # type: ignore[assignment]
     beam: np.ndarray = None  # type: ignore[assignment]
+    images: list = None  # type: ignore[assignment]
 
 
 @dataclass
@@ -193,6 +195,14 @@ def points(scene) -> PointEmitters:
     cones = np.array([spot_solid_angle(np.radians(c), np.radians(b))
                       for c, b in zip(scene.point_cutoff, scene.point_beam, strict=True)]).reshape(-1)
     flux = cones * scene.point_intensity.mean(axis=1)
+    # A projected image scales the power by its mean: exactly for a projector, whose intensity
+    # over its frustum integrates to mean(I) mean(image) times the image's area at distance 1;
+    # for a textured spot, where the image's disk fills the cone, nearly (the selection's pmf
+    # needs no more: any positive pmf is unbiased).
+    for i, image in enumerate(scene.point_images):
+        if image is not None:
+            flux[i] = scene.point_intensity[i].mean() * image.mean() * (
+                image.area if image.kind == "projector" else cones[i])
     lit = np.flatnonzero(flux > 0.0)
     position = scene.point_position[lit]
     axis = np.zeros((len(lit), 3))
@@ -200,7 +210,7 @@ def points(scene) -> PointEmitters:
     return PointEmitters(flux[lit], (-1 - lit).astype(np.int64), np.ones(len(lit)), position, position, axis,
                          -np.ones(len(lit)), [], position=position, intensity=scene.point_intensity[lit],
                          spot_axis=scene.point_axis[lit], cutoff=np.radians(scene.point_cutoff[lit]),
-                         beam=np.radians(scene.point_beam[lit]))
+                         beam=np.radians(scene.point_beam[lit]), images=[scene.point_images[i] for i in lit])
 
 
 def directionals(scene) -> DirectionalEmitters:

@@ -26,6 +26,8 @@ import numpy as np
 from .. import materials
 from ..camera import Camera
 from ..errors import InputError, one_line, shown
+from ..lights import projected_images
+from ..lights.projected_images import ProjectedImage
 from ..materials import conductor, plastic
 from ..record import MAX_SAMPLE_INDEX
 from ..textures import FILTERS, LUMINANCE, WRAPS, Perturbation, Texture, bind, tiltable
@@ -285,6 +287,7 @@ class _SceneReader:
         self.environment: Environment | None = None
         self.environment_element: Element | None = None
         self.spots: list[tuple[np.ndarray, float, float]] = []  # per point light: axis, cutoff, beam (deg)
+        self.point_images: list[ProjectedImage | None] = []  # per point light: what it projects
         self.directionals: list[tuple[np.ndarray, np.ndarray]] = []  # direction, irradiance
 
     def plugin(self, element: Element) -> _Plugin:
@@ -375,7 +378,8 @@ class _SceneReader:
                 p.fail("a thinlens sensor needs aperture_radius (Mitsuba has no default)")
             aperture = p.float("aperture_radius", 0.0, lo=0.0)
             if focus_distance > MAX_COORDINATE:
-                p.fail(f"focus_distance {focus_distance:g} is beyond the coordinate range +-{MAX_COORDINATE:g}")
+                p.fail(f"focus_distance {focus_distance:g} is beyond the coordinate range "
+                       f"+-{MAX_COORDINATE:g}")
         for name in ("principal_point_offset_x", "principal_point_offset_y"):
             if p.type != "orthographic" and p.float(name, 0.0) != 0.0:
                 p.props[name].fail("an off-centre principal point is not supported", element)
@@ -775,17 +779,17 @@ class _SceneReader:
     # -- emitters ----------------------------------------------------------------------------
 
     def point_emitter(self, element: Element) -> None:
-        """A ``point``, ``spot`` or ``directional`` emitter (delta lights)."""
+        """A ``point``, ``spot``, ``projector`` or ``directional`` emitter (delta lights)."""
         p = self.plugin(element)
         if p.type == "directional":
             self.directional_emitter(p)
             return
-        if p.type not in ("point", "spot"):
-            why = {"projector": "projector lights"}.get(p.type)
-            p.fail(f"emitter '{shown(p.type)}' is not supported"
-                   + (f" ({why} are not in tracer)" if why else "")
-                   + "; tracer reads point, spot, directional, envmap and constant emitters and area "
-                   "emitters on shapes")
+        if p.type not in ("point", "spot", "projector"):
+            p.fail(f"emitter '{shown(p.type)}' is not supported; tracer reads point, spot, projector, "
+                   "directional, envmap and constant emitters and area emitters on shapes")
+        if p.type == "projector":
+            self.projector(p)
+            return
         intensity = p.color("intensity", 1.0, "emitter", hi=MAX_RADIANCE)
         position = p.point("position", None) if p.type == "point" else None
         matrix = p.transform()
@@ -796,9 +800,8 @@ class _SceneReader:
             if np.max(np.abs(position)) > MAX_COORDINATE:
                 p.fail(f"the position is beyond the coordinate range +-{MAX_COORDINATE:g}")
         axis, cutoff, beam = np.array([0.0, 0.0, 1.0]), 180.0, 180.0
+        image = None
         if p.type == "spot":
-            if any(obj.tag == "texture" for obj, _ in p.objects):
-                p.fail("a textured spot (an image projected by the light) is not supported")
             cutoff_degrees = p.float("cutoff_angle", 20.0, lo=0.0, hi=180.0, lo_open=True)
             beam_degrees = p.float("beam_width", 0.75 * cutoff_degrees, lo=0.0, hi=180.0)
             linear = np.eye(3) if matrix is None else matrix[:3, :3]
@@ -807,11 +810,71 @@ class _SceneReader:
                 p.props["to_world"].fail(f"to_world of a spot light: {problem}", element)
             axis = linear[:, 2] / np.linalg.norm(linear[:, 2])
             cutoff, beam = cutoff_degrees, beam_degrees
+            textures = [obj for obj, _ in p.objects if obj.tag == "texture"]
+            if textures:
+                if cutoff_degrees >= 90.0:
+                    p.props["cutoff_angle"].fail("a textured spot's cutoff_angle must be below 90 degrees "
+                                                 "(its image lies on a plane ahead of the light)", element)
+                texture = self.projected_texture(p, "texture")
+                factor = projected_images.spot_factor(math.radians(cutoff_degrees))
+                image = ProjectedImage("spot", _rotation_rows(linear), factor, factor, texture)
         p.float("sampling_weight", 1.0, lo=0.0)
         p.done()
         self.positions.append(position)
         self.intensities.append(intensity)
         self.spots.append((axis, cutoff, beam))
+        self.point_images.append(image)
+
+    def projected_texture(self, p: _Plugin, name: str) -> Texture:
+        """The bitmap a light projects (``texture`` of a spot, ``irradiance`` of a projector)."""
+        found = p.nested("texture")
+        for _, written in found:
+            if written.attr("name") != name:
+                written.fail(f"a <texture> of this light must be named '{name}'")
+        if len(found) > 1:
+            found[1][1].fail(f"a second <texture> '{name}'")
+        element = found[0][0]
+        texture = self.texture(element, "emitter")
+        if texture.kind != "bitmap":
+            element.fail(f"a light projects a bitmap texture; this is '{texture.kind}'")
+        if not np.array_equal(texture.to_uv, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])):
+            element.fail("a light's projected image with a to_uv transform is not supported")
+        return texture
+
+    def projector(self, p: _Plugin) -> None:
+        """Mitsuba's ``projector`` (src/emitters/projector.cpp): a point light at ``to_world``'s
+        origin projecting ``irradiance`` (a bitmap or a constant) through a pinhole frustum of
+        ``fov`` (parsed as a sensor's, on the image's aspect ratio), ``scale`` times;
+        ``tracer.lights.projected_images``."""
+        scale = p.float("scale", 1.0, lo=0.0, hi=MAX_RADIANCE)
+        if any(obj.tag == "texture" for obj, _ in p.objects):
+            texture = self.projected_texture(p, "irradiance")
+        else:
+            irradiance = p.color("irradiance", 1.0, "emitter", hi=MAX_RADIANCE)
+            texture = _constant_texture(irradiance, p.element.where)
+        height, width = texture.pixels.shape[:2]
+        # Mitsuba's parse_fov at aspect W / H: fov_axis x by default; the frustum's horizontal
+        # tangent from tracer's vertical one (tan_half_vertical, the camera's rule).
+        tan_half_x = self.tan_half_vertical(p, width, height) * width / height
+        matrix = p.transform()
+        linear = np.eye(3) if matrix is None else matrix[:3, :3]
+        problem = _similarity_problem(linear)
+        if problem is not None:
+            p.props["to_world"].fail(f"to_world of a projector: {problem}", p.element)
+        position = np.zeros(3) if matrix is None else matrix[:3, 3]
+        if np.max(np.abs(position)) > MAX_COORDINATE:
+            p.fail(f"the position is beyond the coordinate range +-{MAX_COORDINATE:g}")
+        p.float("sampling_weight", 1.0, lo=0.0)
+        p.done()
+        factor_u, factor_v, half_angle, area = projected_images.projector_frustum(tan_half_x, width / height)
+        # A uniform scale s of to_world scales Mitsuba's intensity by s (its 1 / (z_local^2 cos)
+        # with z_local = d cos / s and cos measured on the scaled axis).
+        size = float(np.linalg.norm(linear[:, 2]))
+        self.positions.append(position)
+        self.intensities.append(np.full(3, math.pi * scale * size))
+        self.spots.append((linear[:, 2] / size, math.degrees(half_angle), math.degrees(half_angle)))
+        self.point_images.append(ProjectedImage("projector", _rotation_rows(linear), factor_u, factor_v,
+                                                texture, area=area))
 
     def directional_emitter(self, p: _Plugin) -> None:
         """A ``directional`` emitter: irradiance arriving along ``direction`` (or to_world's +z)."""
@@ -1301,13 +1364,20 @@ class _SceneReader:
         except ValueError as exc:  # the parameter ranges every reader is held to (Param.check)
             raise InputError(str(exc), self.document.path) from None
         return g.scene(self.document.path, camera, table, self.positions, self.intensities, self.render,
-                       self.environment, spots=self.spots, directionals=self.directionals)
+                       self.environment, spots=self.spots, directionals=self.directionals,
+                       images=self.point_images)
 
 
 def _constant_texture(rgb: np.ndarray, where: str) -> Texture:
     """A constant as a texture: one texel, looked up nearest (its gradient is 0)."""
     return Texture("bitmap", pixels=np.asarray(rgb, dtype=np.float32).reshape(1, 1, 3), filter="nearest",
                    source=where, raw=True)
+
+
+def _rotation_rows(linear: np.ndarray) -> np.ndarray:
+    """World to a light's frame: the rows are its transform's columns, normalized (the
+    transform is a rotation times a uniform scale: ``_similarity_problem``)."""
+    return (linear / np.linalg.norm(linear, axis=0)).T.copy()
 
 
 def _similarity_problem(linear: np.ndarray) -> str | None:

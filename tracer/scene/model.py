@@ -86,6 +86,8 @@ class Scene:
         ``point_beam`` (P,) its cutoff and beam-width angles in degrees, Mitsuba's ``spot``
         (full intensity within the beam width, falling linearly in angle to 0 at the cutoff);
         180 and 180 for a light that shines every way (the default).
+    point_images : (P,) list, the image each point light projects (a textured spot, a projector:
+        ``tracer.lights.projected_images.ProjectedImage``) or None.
     directional_direction : (D, 3) the unit direction each directional light's light travels
         in; ``directional_irradiance`` (D, 3) its irradiance on a surface facing it, W/m^2.
 
@@ -117,6 +119,7 @@ class Scene:
     point_axis: np.ndarray | None = None
     point_cutoff: np.ndarray | None = None
     point_beam: np.ndarray | None = None
+    point_images: list | None = None
     directional_direction: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     directional_irradiance: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
@@ -128,8 +131,11 @@ class Scene:
                              else np.asarray(self.point_cutoff, dtype=np.float64).reshape(-1))
         self.point_beam = (np.full(count, 180.0) if self.point_beam is None
                            else np.asarray(self.point_beam, dtype=np.float64).reshape(-1))
-        if not len(self.point_axis) == len(self.point_cutoff) == len(self.point_beam) == count:
-            raise ValueError("point_axis, point_cutoff and point_beam need one row per point light")
+        self.point_images = [None] * count if self.point_images is None else list(self.point_images)
+        if not len(self.point_axis) == len(self.point_cutoff) == len(self.point_beam) == len(self.point_images) \
+                == count:
+            raise ValueError("point_axis, point_cutoff, point_beam and point_images need one row per point "
+                             "light")
         self.directional_direction = np.asarray(self.directional_direction, dtype=np.float64).reshape(-1, 3)
         self.directional_irradiance = np.asarray(self.directional_irradiance, dtype=np.float32).astype(
             np.float64).reshape(-1, 3)
@@ -235,6 +241,9 @@ class Scene:
         if np.any(self.point_cutoff < 180.0):  # spot lights; likewise
             add("point_axis", self.point_axis, "<f8")
             add("point_cone", np.stack([self.point_cutoff, self.point_beam], axis=1), "<f8")
+        for i, image in enumerate(self.point_images):  # projected images; likewise
+            if image is not None:
+                digest.update(f"point image {i}\0".encode() + image.digest())
         if len(self.directional_direction):  # likewise
             add("directional_direction", self.directional_direction, "<f8")
             add("directional_irradiance", self.directional_irradiance, "<f4")

@@ -519,10 +519,11 @@ class _Geometry:
 
     def scene(self, path: str, camera: Camera, table: materials.MaterialTable, point_position: list,
               point_intensity: list, render: dict[str, Any], environment: Environment | None = None,
-              spots: list | None = None, directionals: list | None = None) -> Scene:
+              spots: list | None = None, directionals: list | None = None, images: list | None = None) -> Scene:
         """The scene of these shapes with the rest a reader read: every reader ends here.
         ``spots``: per point light ``(axis, cutoff, beam)`` (degrees; 180, 180: every way), or
-        None for all omnidirectional; ``directionals``: ``(direction, irradiance)`` per light."""
+        None for all omnidirectional; ``directionals``: ``(direction, irradiance)`` per light;
+        ``images``: per point light the image it projects or None (None: no images)."""
         for i, shape in enumerate(self.shapes):
             cutout = table.opacity[shape.material] < 1.0 or shape.material in self.textures.cutouts
             if shape.emissive and cutout:
@@ -558,6 +559,7 @@ class _Geometry:
             point_axis=np.array([s[0] for s in spots], dtype=np.float64).reshape(-1, 3),
             point_cutoff=np.array([s[1] for s in spots], dtype=np.float64),
             point_beam=np.array([s[2] for s in spots], dtype=np.float64),
+            point_images=images,
             directional_direction=np.array([d[0] for d in directionals], dtype=np.float64).reshape(-1, 3),
             directional_irradiance=_float32([d[1] for d in directionals]).reshape(-1, 3),
         )

@@ -56,6 +56,11 @@ def write_scene(scene: Scene, path: str | os.PathLike[str], source: str | None =
         # Its texels would need an image file beside the TOML; until then, refused, never lost.
         raise InputError("the scene has an environment map, which tracer convert does not write yet: render "
                          "the XML scene itself", str(scene.path))
+    projecting = [image.kind for image in scene.point_images if image is not None]
+    if projecting:
+        raise InputError(f"the scene has lights that project images ({', '.join(sorted(set(projecting)))}), "
+                         "which tracer's TOML format does not hold yet: render the XML scene itself",
+                         str(scene.path))
     target = Path(path)
     inputs = _inputs(scene)
     taken: set[Path] = set()

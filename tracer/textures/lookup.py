@@ -98,10 +98,17 @@ def evaluate(textures, t: int, u: float, v: float):
         first = (su - math.floor(su) > 0.5) == (sv - math.floor(sv) > 0.5)
         column = COLOR0 if first else COLOR1
         return info[t, column], info[t, column + 1], info[t, column + 2]
-    pixels = textures.pixels
-    width, height, offset = int(info[t, WIDTH]), int(info[t, HEIGHT]), int(info[t, OFFSET])
-    wrap = int(info[t, WRAP])
-    if int(info[t, FILTER]) != BILINEAR:
+    return bitmap_value(textures.pixels, int(info[t, OFFSET]), int(info[t, WIDTH]), int(info[t, HEIGHT]),
+                        int(info[t, WRAP]), int(info[t, FILTER]) == BILINEAR, su, sv)
+
+
+@jit
+def bitmap_value(pixels, offset: int, width: int, height: int, wrap: int, bilinear: bool, su: float,
+                 sv: float):
+    """The RGB value at (su, sv) of the ``width`` x ``height`` bitmap whose texels start at
+    ``pixels[offset]`` (RGB, row by row, row 0 at v = 0), looked up as Mitsuba's ``bitmap``:
+    the texel holding (su, sv), or bilinear between the four texel centres around it."""
+    if not bilinear:
         i = _wrapped(int(math.floor(su * width)), width, wrap)
         j = _wrapped(int(math.floor(sv * height)), height, wrap)
         return (_texel(pixels, offset, width, i, j, 0), _texel(pixels, offset, width, i, j, 1),
