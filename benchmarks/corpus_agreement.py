@@ -136,7 +136,7 @@ def render_mitsuba(scene: Path, root: Path, out: Path, size: int, runs: int, spp
     print(f"{name}: {width}x{height}, {runs} x {spp} spp, {time.perf_counter() - start:.1f} s", flush=True)
 
 
-def compare_all(out: Path, spp: int, seed: int) -> int:
+def compare_all(out: Path, spp: int, seed: int, light_selection: str = "power") -> int:
     import tracer
 
     failed = 0
@@ -149,12 +149,13 @@ def compare_all(out: Path, spp: int, seed: int) -> int:
                                         str(data["mitsuba_version"]), "", "")
             scene_file = out / str(data["scene"])
         scene = tracer.load_scene(scene_file, width=ref.width, height=ref.height)
-        image = tracer.render(scene, "mis", spp=spp, seed=seed, sampler="independent")
+        image = tracer.render(scene, tracer.Strategy("mis", light_selection=light_selection), spp=spp, seed=seed,
+                              sampler="independent")
         c = mitsuba_xml.compare(image.mean, image.variance, image.count, ref)
         var_mean = image.variance / np.maximum(image.count, 1)[..., None]
         block_p, worst = mitsuba_xml.block_test(image.mean, var_mean, ref)
         relative = c.mean_tracer / np.where(c.mean_mitsuba > 0, c.mean_mitsuba, np.nan) - 1.0
-        ok = min(c.mean_p, c.sidak_p, c.chi2_p, block_p) >= mitsuba_xml.FAMILY_ALPHA and not c.exact_bad.any()
+        ok = bool(min(c.mean_p, c.sidak_p, c.chi2_p, block_p) >= mitsuba_xml.FAMILY_ALPHA and not c.exact_bad.any())
         failed += not ok
         rows.append({"scene": record.stem, "size": f"{ref.width}x{ref.height}",
                      "mean": " / ".join(f"{100 * r:+.2f}%" for r in relative),
@@ -183,6 +184,11 @@ def main() -> int:
     p.add_argument("--mitsuba-spp", type=int, default=256)
     p.add_argument("--spp", type=int, default=1024)
     p.add_argument("--seed", type=int, default=15)
+    # A scene whose power estimates starve a light (a spot beside an environment, whose power is
+    # estimated over the scene's bounding sphere) renders heavy-tailed noise under "power" at
+    # 1024 spp, which the tests' normal bounds do not cover: "uniform" shows whether the
+    # estimator agrees there.
+    p.add_argument("--light-selection", default="power")
     args = p.parse_args()
     global INTEGRATOR
     INTEGRATOR = INTEGRATORS[args.integrator]
@@ -195,7 +201,7 @@ def main() -> int:
             root = corpus / scene.relative_to(corpus).parts[0]
             render_mitsuba(scene, root, args.out, args.size, args.runs, args.mitsuba_spp)
         return 0
-    return compare_all(args.out, args.spp, args.seed)
+    return compare_all(args.out, args.spp, args.seed, args.light_selection)
 
 
 if __name__ == "__main__":
