@@ -100,14 +100,14 @@ VERSION = re.compile(rb'<scene\b[^>]*\bversion\s*=\s*"(\d+)\.')
 # The plugins tracer reads today (kept by hand: the static count below is a planning aid, the
 # outcome of each render is the measurement). Integrators are all read (told, not obeyed).
 READS = {
-    "shape": {"obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk"},
-    "bsdf": {"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "twosided", "dielectric",
-             "thindielectric"},
-    "emitter": {"area", "point", "envmap", "constant"},
-    "sensor": {"perspective"},
-    "texture": {"bitmap", "checkerboard"},
+    "shape": {"obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk", "cylinder", "instance",
+              "shapegroup"},
+    "bsdf": {"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "pplastic", "twosided",
+             "dielectric", "roughdielectric", "thindielectric", "mask", "normalmap", "bumpmap"},
+    "emitter": {"area", "point", "spot", "projector", "directional", "envmap", "constant"},
+    "sensor": {"perspective", "thinlens", "orthographic"},
+    "texture": {"bitmap", "checkerboard", "mesh_attribute"},
 }
-
 
 def needs(scene: Path) -> set[str]:
     """What a scene's files (the scene and, transitively, what it includes, found beside the
