@@ -216,6 +216,9 @@ def test_toml_camera_refusals_name_the_key(tmp_path, camera, words):
 
 @pytest.mark.parametrize("kind, props, ops, words", [
     ("thinlens", _fov(40), LOOKAT, "needs aperture_radius"),
+    ("thinlens", _fov(40) + '<float name="aperture_radius" value="1e300"/>', LOOKAT, "aperture_radius"),
+    ("thinlens", _fov(40) + '<float name="aperture_radius" value="0.1"/><float name="focus_distance" '
+     'value="1e300"/>', LOOKAT, "focus_distance"),
     ("orthographic", "", '<scale x="2" y="1"/>' + LOOKAT, "scales x and y differently"),
     ("orthographic", "", '<matrix value="1 0.5 0 0  0 1 0 0  0 0 1 0  0 0 0 1"/>', "shears"),
     ("orthographic", "", '<scale x="0"/>', "collapses an axis"),

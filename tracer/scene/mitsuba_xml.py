@@ -376,7 +376,7 @@ class _SceneReader:
         if p.type == "thinlens":
             if not p.has("aperture_radius"):
                 p.fail("a thinlens sensor needs aperture_radius (Mitsuba has no default)")
-            aperture = p.float("aperture_radius", 0.0, lo=0.0)
+            aperture = p.float("aperture_radius", 0.0, lo=0.0, hi=MAX_COORDINATE)
             if focus_distance > MAX_COORDINATE:
                 p.fail(f"focus_distance {focus_distance:g} is beyond the coordinate range "
                        f"+-{MAX_COORDINATE:g}")
