@@ -221,7 +221,7 @@ def test_toml_camera_refusals_name_the_key(tmp_path, camera, words):
      'value="1e300"/>', LOOKAT, "focus_distance"),
     ("orthographic", "", '<scale x="2" y="1"/>' + LOOKAT, "scales x and y differently"),
     ("orthographic", "", '<matrix value="1 0.5 0 0  0 1 0 0  0 0 1 0  0 0 0 1"/>', "shears"),
-    ("orthographic", "", '<scale x="0"/>', "collapses an axis"),
+    ("orthographic", "", '<scale x="0"/>', "scales one axis to zero"),
     ("orthographic", _fov(40), LOOKAT, "fov"),
 ])
 def test_xml_sensor_refusals(tmp_path, kind, props, ops, words):

@@ -11,6 +11,7 @@ statistical, except where a test says so.
 from __future__ import annotations
 
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 from conftest import ROOT
 from projected_light_cases import CASES, POINTS
@@ -103,8 +104,30 @@ def test_convert_refuses_projected_images(tmp_path):
     (CASES["projector_scaled"].replace(
         '</texture>', '<transform name="to_uv"><scale value="2"/></transform></texture>'), "to_uv"),
     (CASES["projector_scaled"].replace('value="40"', 'value="190"'), "fov"),
+    # Numbers whose light overflows: the scale, to_world's scale, the frustum.
+    (CASES["projector_scaled"].replace('value="2.5"', 'value="1e18"'), "exceed 1e+18"),
+    (CASES["projector_scaled"].replace('<scale value="1.5"/>', '<scale value="1e200"/>'),
+     "to_world of a projector"),
+    (CASES["projector_focal_length"].replace('"35mm"', '"1e-300"'), "horizontal field of view"),
+    (CASES["spot_bilinear"].replace('value="28"', 'value="1e-300"'), "at least 0.0001 degrees"),
 ])
 def test_refusals_name_the_element(tmp_path, emitter, words):
+    with pytest.raises(InputError) as caught:
+        scene_of(tmp_path, emitter)
+    assert words in str(caught.value) and "\n" not in str(caught.value), str(caught.value)
+
+
+@pytest.mark.parametrize("texel, words", [(3e38, "intensity x texels exceed 1e+18"),
+                                          (-1.0, "negative texels")])
+def test_hot_or_negative_images_are_refused(tmp_path, texel, words):
+    """An EXR a spot projects with a texel near float32's limit would make an infinite light
+    power (and a NaN light choice): refused, as an environment map's is; so is a negative one."""
+    path = tmp_path / "hot.exr"
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(2, 2, 3, "float"))
+    out.write_image(np.full((2, 2, 3), [texel, 0.5, 0.5], dtype=np.float32))
+    out.close()
+    emitter = CASES["spot_bilinear"].replace("textures/ramp.exr", str(path))
     with pytest.raises(InputError) as caught:
         scene_of(tmp_path, emitter)
     assert words in str(caught.value) and "\n" not in str(caught.value), str(caught.value)

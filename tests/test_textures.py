@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -113,17 +114,24 @@ def test_image_files_are_decoded_as_mitsuba_decodes_them(tmp_path):
     np.testing.assert_allclose(grey, np.full((1, 1, 3), 0.2), rtol=1e-6)
 
 
+TILES_PNG = Path(__file__).resolve().parents[1] / "tracer/scenes/mitsuba/textures/tiles.png"
+
+
 @pytest.mark.parametrize("content, words", [
     (None, "texture image not found"),
     (b"not an image", "cannot read texture image"),
+    (TILES_PNG.read_bytes()[:300], "hit end of file"),  # a PNG cut in its pixel data
 ])
-def test_unusable_image_files_are_refused_naming_them(tmp_path, content, words):
+def test_unusable_image_files_are_refused_naming_them(tmp_path, capfd, content, words):
+    """One line names the file; libpng's own line on a truncated PNG (written by C to file
+    descriptor 2) is not printed beside it."""
     path = tmp_path / "t.png"
     if content is not None:
         path.write_bytes(content)
     with pytest.raises(InputError, match=words) as caught:
         read_texels(path, raw=False, where="scene.xml:3")
-    assert str(path) in str(caught.value)
+    assert str(path) in str(caught.value) and "\n" not in str(caught.value)
+    assert capfd.readouterr().err == ""
 
 
 # (u, v) of Mitsuba 3.9.1's shapes at points on them, read from Mitsuba itself

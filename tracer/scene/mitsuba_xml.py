@@ -27,7 +27,7 @@ from .. import materials
 from ..camera import Camera
 from ..errors import InputError, one_line, shown
 from ..lights import projected_images
-from ..lights.projected_images import ProjectedImage
+from ..lights.projected_images import HEADER_WIDTH, MAX_TABLE_FLOATS, ProjectedImage
 from ..materials import conductor, plastic
 from ..record import MAX_SAMPLE_INDEX
 from ..textures import FILTERS, LUMINANCE, WRAPS, Perturbation, Texture, bind, tiltable
@@ -57,6 +57,10 @@ from .toml_reader import MAX_COORDINATE, MAX_RADIANCE, MAX_SIDE, NO_UV, _Geometr
 FILM_SIZE = (768, 576)
 FOCAL_LENGTH_MM = 50.0  # a perspective sensor without fov or focal_length
 FILM_DIAGONAL_MM = math.hypot(36.0, 24.0)  # focal_length is a 35 mm film equivalent
+# A projected image's frustum: tan(angle / 2) and its inverse stay in float32 and its corners'
+# 1 / cos^3 finite (``projected_images.image_factor``).
+MIN_PROJECTION_DEGREES = 1e-4
+MAX_PROJECTOR_DEGREES = 179.0
 MIN_ALPHA = 1e-4  # Mitsuba's microfacet distributions clamp alpha to at least this
 # A disk is a fan of this many triangles: its area is (N/2) sin(2 pi/N) r^2, within 8e-5 of
 # pi r^2 (the issue asks for 0.01%).
@@ -288,6 +292,7 @@ class _SceneReader:
         self.environment_element: Element | None = None
         self.spots: list[tuple[np.ndarray, float, float]] = []  # per point light: axis, cutoff, beam (deg)
         self.point_images: list[ProjectedImage | None] = []  # per point light: what it projects
+        self.projected_floats = 0  # the light table's floats those images take (``projected_texture``)
         self.directionals: list[tuple[np.ndarray, np.ndarray]] = []  # direction, irradiance
 
     def plugin(self, element: Element) -> _Plugin:
@@ -422,7 +427,8 @@ class _SceneReader:
             p.props["to_world"].fail("the camera's to_world is beyond the coordinate range", p.element)
         lengths = np.linalg.norm(linear, axis=0)
         if np.min(lengths) <= 0.0 or np.max(lengths) / np.min(lengths) > 1e12:
-            p.props["to_world"].fail("the camera's to_world collapses an axis", p.element)
+            p.props["to_world"].fail("the camera's to_world scales one axis to zero or over 1e12 times "
+                                     "another", p.element)
         axes = linear / lengths
         if np.max(np.abs(axes.T @ axes - np.eye(3))) > RIGID_TOLERANCE:
             p.props["to_world"].fail("the camera's to_world shears: tracer's orthographic camera takes a "
@@ -816,6 +822,10 @@ class _SceneReader:
                     p.props["cutoff_angle"].fail("a textured spot's cutoff_angle must be below 90 degrees "
                                                  "(its image lies on a plane ahead of the light)", element)
                 texture = self.projected_texture(p, "texture")
+                _check_projected_radiance(p, texture, float(np.max(intensity)), "intensity x texels")
+                if cutoff_degrees < MIN_PROJECTION_DEGREES:  # its 1 / tan(cutoff) overflows float32
+                    p.props["cutoff_angle"].fail(f"a textured spot's cutoff_angle must be at least "
+                                                 f"{MIN_PROJECTION_DEGREES:g} degrees", element)
                 factor = projected_images.spot_factor(math.radians(cutoff_degrees))
                 image = ProjectedImage("spot", _rotation_rows(linear), factor, factor, texture)
         p.float("sampling_weight", 1.0, lo=0.0)
@@ -839,6 +849,15 @@ class _SceneReader:
             element.fail(f"a light projects a bitmap texture; this is '{texture.kind}'")
         if not np.array_equal(texture.to_uv, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])):
             element.fail("a light's projected image with a to_uv transform is not supported")
+        if np.any(texture.pixels < 0.0):
+            element.fail("a light's projected image has negative texels (light is >= 0)")
+        height, width = texture.pixels.shape[:2]
+        # The light table's float32 offsets are exact below 2^24 (``projected_images``); all the
+        # images of a scene share that, so the running total is checked here, where a line is known.
+        self.projected_floats += (1 + -(-3 * height * width // HEADER_WIDTH)) * HEADER_WIDTH
+        if self.projected_floats > MAX_TABLE_FLOATS:
+            element.fail(f"the lights' projected images hold {self.projected_floats:,} floats; tracer's "
+                         f"light table holds {MAX_TABLE_FLOATS:,} (use smaller images)")
         return texture
 
     def projector(self, p: _Plugin) -> None:
@@ -856,6 +875,11 @@ class _SceneReader:
         # Mitsuba's parse_fov at aspect W / H: fov_axis x by default; the frustum's horizontal
         # tangent from tracer's vertical one (tan_half_vertical, the camera's rule).
         tan_half_x = self.tan_half_vertical(p, width, height) * width / height
+        fov_x = 2.0 * math.degrees(math.atan(tan_half_x))
+        if not MIN_PROJECTION_DEGREES <= fov_x <= MAX_PROJECTOR_DEGREES:
+            (p.props.get("fov") or p.props.get("focal_length") or p.element).fail(
+                f"a projector's horizontal field of view must lie in [{MIN_PROJECTION_DEGREES:g}, "
+                f"{MAX_PROJECTOR_DEGREES:g}] degrees; this is {fov_x:g}", p.element)
         matrix = p.transform()
         linear = np.eye(3) if matrix is None else matrix[:3, :3]
         problem = _similarity_problem(linear)
@@ -870,6 +894,8 @@ class _SceneReader:
         # A uniform scale s of to_world scales Mitsuba's intensity by s (its 1 / (z_local^2 cos)
         # with z_local = d cos / s and cos measured on the scaled axis).
         size = float(np.linalg.norm(linear[:, 2]))
+        _check_projected_radiance(p, texture, math.pi * scale * size,
+                                  "pi x scale x to_world's scale x texels")
         self.positions.append(position)
         self.intensities.append(np.full(3, math.pi * scale * size))
         self.spots.append((linear[:, 2] / size, math.degrees(half_angle), math.degrees(half_angle)))
@@ -1374,6 +1400,12 @@ def _constant_texture(rgb: np.ndarray, where: str) -> Texture:
                    source=where, raw=True)
 
 
+def _check_projected_radiance(p: _Plugin, texture: Texture, factor: float, what: str) -> None:
+    """Refuse a projected image whose brightest texel times ``factor`` exceeds MAX_RADIANCE."""
+    if not float(np.max(texture.pixels, initial=0.0)) * factor <= MAX_RADIANCE:
+        p.fail(f"the light's {what} exceed {MAX_RADIANCE:g}")
+
+
 def _rotation_rows(linear: np.ndarray) -> np.ndarray:
     """World to a light's frame: the rows are its transform's columns, normalized (the
     transform is a rotation times a uniform scale: ``_similarity_problem``)."""
@@ -1385,8 +1417,11 @@ def _similarity_problem(linear: np.ndarray) -> str | None:
     spot's cone is its +z axis and an angle, which another transform would distort."""
     if not np.all(np.isfinite(linear)):
         return "numbers must be finite"
-    gram = linear.T @ linear
+    with np.errstate(over="ignore"):
+        gram = linear.T @ linear
     scale = float(np.trace(gram)) / 3.0
+    if not np.all(np.isfinite(gram)) or not math.isfinite(scale):
+        return "its scale is beyond the number range"
     if not scale > 0.0 or np.max(np.abs(gram / scale - np.eye(3))) > 1e-4:
         return "it must be a rotation and translation (a scale or shear would distort the cone)"
     return None

@@ -10,6 +10,10 @@ every texel once here gives the same values.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -33,10 +37,51 @@ def read_texels(path: Path, raw: bool, where: str, key: str | None = None) -> np
 
     if not path.is_file():
         raise InputError(f"texture image not found: {path}", where, key)
+    with _native_stderr_held() as held:
+        try:
+            return _decode(oiio, path, raw, where, key)
+        except InputError:
+            held.drop = True  # the error says it in one line: libpng's own lines are dropped
+            raise
+
+
+class _Held:
+    """What C libraries wrote to stderr inside ``_native_stderr_held``: ``drop`` discards it."""
+
+    drop = False
+
+
+@contextlib.contextmanager
+def _native_stderr_held():
+    """Hold what C code (libpng prints "libpng error: ..." itself) writes to file descriptor 2,
+    and write it out afterwards unless the caller set ``drop``: a refused image then gives the
+    one line of its InputError, and a warning on an image that is read is still shown."""
+    held = _Held()
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no usable stderr: nothing to hold
+        yield held
+        return
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield held
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            text = sink.read()
+            if text and not held.drop:
+                sys.stderr.write(text.decode(errors="replace"))
+
+
+def _decode(oiio, path: Path, raw: bool, where: str, key: str | None) -> np.ndarray:
+    """``read_texels`` once the file exists, with its stderr held."""
     image = oiio.ImageInput.open(str(path))
     if image is None:
-        raise InputError(f"cannot read texture image {path}: {oiio.geterror().strip() or 'unknown format'}",
-                         where, key)
+        reason = _first_line(oiio.geterror()) or "unknown format"
+        raise InputError(f"cannot read texture image {path}: {reason}", where, key)
     try:
         spec = image.spec()
         width, height, channels = spec.width, spec.height, spec.nchannels
@@ -48,7 +93,8 @@ def read_texels(path: Path, raw: bool, where: str, key: str | None = None) -> np
         integer = spec.format.basetype in (oiio.UINT8, oiio.INT8, oiio.UINT16, oiio.INT16)
         pixels = image.read_image(0, 0, 0, channels, oiio.FLOAT)
         if pixels is None:
-            raise InputError(f"cannot read texture image {path}: {image.geterror().strip()}", where, key)
+            reason = _first_line(image.geterror()) or "unknown error"
+            raise InputError(f"cannot read texture image {path}: {reason}", where, key)
     finally:
         image.close()
     pixels = np.asarray(pixels, dtype=np.float64).reshape(height, width, channels)
@@ -58,3 +104,8 @@ def read_texels(path: Path, raw: bool, where: str, key: str | None = None) -> np
     if integer and not raw:
         colour = srgb_to_linear(np.clip(colour, 0.0, 1.0))
     return np.ascontiguousarray(colour, dtype=np.float32)
+
+
+def _first_line(text: str) -> str:
+    """OpenImageIO's first line of an error (libpng repeats it in the lines after)."""
+    return next((line.strip() for line in text.splitlines() if line.strip()), "")
