@@ -62,6 +62,7 @@ REFERENCES = {
     "orthographic": (96, 64, 32, 256),
     "thinlens": (96, 64, 32, 256),
     "projected_lights": (96, 64, 32, 256),
+    "anisotropic": (96, 72, 32, 256),
 }
 
 # tracer's side of the comparison (--compare and tests/test_mitsuba_agreement.py).

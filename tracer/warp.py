@@ -127,8 +127,15 @@ def ggx_visible_normal(wo, alpha: float, u0: float, u1: float):
     normalized, with v the stretched wo; unstretching gives h. Same distribution as Heitz's
     disk construction, with no basis to build.
     """
+    return ggx_visible_normal_anisotropic(wo, alpha, alpha, u0, u1)
+
+
+@jit
+def ggx_visible_normal_anisotropic(wo, alpha_x: float, alpha_y: float, u0: float, u1: float):
+    """:func:`ggx_visible_normal` of the anisotropic GGX of roughness ``alpha_x`` along local x
+    and ``alpha_y`` along y: the stretch is (alpha_x, alpha_y, 1) (Heitz 2018 works in it)."""
     # Stretch wo.
-    vx, vy, vz = alpha * wo[0], alpha * wo[1], wo[2]
+    vx, vy, vz = alpha_x * wo[0], alpha_y * wo[1], wo[2]
     inv = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
     vx, vy, vz = vx * inv, vy * inv, vz * inv
     # Uniform point on the cap of the unit sphere above z = -vz.
@@ -136,8 +143,8 @@ def ggx_visible_normal(wo, alpha: float, u0: float, u1: float):
     z = (1.0 - u1) * (1.0 + vz) - vz
     sin_theta = math.sqrt(max(0.0, 1.0 - z * z))
     # Visible normal in the stretched configuration, then unstretched and normalized.
-    hx = alpha * (sin_theta * math.cos(phi) + vx)
-    hy = alpha * (sin_theta * math.sin(phi) + vy)
+    hx = alpha_x * (sin_theta * math.cos(phi) + vx)
+    hy = alpha_y * (sin_theta * math.sin(phi) + vy)
     hz = max(z + vz, 0.0)
     inv = 1.0 / math.sqrt(hx * hx + hy * hy + hz * hz)
     return (hx * inv, hy * inv, hz * inv)

@@ -32,7 +32,7 @@ from ..jit import jit
 from ..kernels import UNBOUND, kernel
 from ..lights import environment as environment_light
 from ..samplers import dimensions
-from ..textures import PERTURB_KIND, lookup, shading_frames
+from ..textures import FRAME, PERTURB_KIND, lookup, shading_frames
 from . import light_samples, shading_point
 from .combiners import ris
 from .direction_samples import direction_arrays, direction_sample, direction_value, environment_value
@@ -118,8 +118,9 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
             own_row = material
             here, material = lookup.textured_row(textures, params, material, hit_table, first_sphere, p, x,
                                                  scratch)
-            if textures.perturb[own_row, PERTURB_KIND] != 0.0:
-                tilted = True
+            perturbation = textures.perturb[own_row, PERTURB_KIND]
+            if perturbation != 0.0:
+                tilted = perturbation != FRAME  # a frame alone masks and shadows nothing
                 reflects, normal, s, t, wo, a2 = shading_frames.perturbed(
                     textures, own_row, hit_table, first_sphere, corner_normals, p, x, d, unperturbed)
                 if not reflects:

@@ -103,6 +103,10 @@ class MaterialType(Plugin):
         ``behind(values) -> values``, its parameters as seen from behind the shading normal. The
         estimator shades a hit from behind with a row of those (``MaterialTable.shading``), so
         that the type itself always sees ``wo.z > 0``.
+    oriented : ``oriented(values) -> bool``, for a type whose value can depend on the direction
+        of the surface's tangent (anisotropic roughness): where it is True for a row, the
+        kernels shade that row in Mitsuba's frame, s along dp/du (``tracer.textures.FRAME``);
+        other rows are isotropic about the normal and take any tangent.
     transmits : the type has a transmission lobe with a density (``roughdielectric``): its
         ``eval_pdf`` may be nonzero for wi.z < 0, light sampling takes |cos theta_i| and no
         light selection may skip the lights below its shading normal's horizon. (A delta
@@ -115,6 +119,7 @@ class MaterialType(Plugin):
     derive: Callable[[dict[str, object]], dict[str, object]] | None = None
     behind: Callable[[dict[str, object]], dict[str, object]] | None = None
     transmits: bool = False
+    oriented: Callable[[dict[str, object]], bool] | None = None
     dims: int = 3
     kind: str = "material"
 

@@ -1,6 +1,7 @@
 """Microfacet distributions (GGX and Beckmann), Fresnel terms and the math of the rough materials.
 
-Both distributions are isotropic, with Smith's separable masking-shadowing
+Both distributions are isotropic or, for ``roughconductor``, anisotropic (the section of that
+name), with Smith's separable masking-shadowing
 G(wo, wi) = G1(wo) G1(wi), and are sampled by their visible normals: h has the solid-angle
 density D_wo(h) = G1(wo) max(0, wo.h) D(h) / wo.z (Heitz 2018, "Sampling the GGX distribution of
 visible normals", JCGT 7(4)), so wi = reflect(wo, h) has pdf D_wo(h) / (4 wo.h) = G1(wo) D(h) /
@@ -196,11 +197,18 @@ def _beckmann_slope_cdf(t: float, tan_theta: float, erf_cot: float, exp_cot: flo
     return 0.5 * (math.erf(t) + erf_cot) + tan_theta / (2.0 * SQRT_PI) * (exp_cot - math.exp(-t * t))
 
 
-@jit_called
+@jit
 def beckmann_visible_normal(wo, alpha: float, u0: float, u1: float):
     """A half vector h distributed as the Beckmann normals visible from local ``wo`` (wo.z > 0)."""
+    return beckmann_visible_normal_anisotropic(wo, alpha, alpha, u0, u1)
+
+
+@jit_called
+def beckmann_visible_normal_anisotropic(wo, alpha_x: float, alpha_y: float, u0: float, u1: float):
+    """:func:`beckmann_visible_normal` of roughness ``alpha_x`` along local x and ``alpha_y``
+    along y: the slopes are stretched by (alpha_x, alpha_y)."""
     # Stretch wo to the alpha = 1 configuration.
-    vx, vy, vz = alpha * wo[0], alpha * wo[1], wo[2]
+    vx, vy, vz = alpha_x * wo[0], alpha_y * wo[1], wo[2]
     length = math.sqrt(vx * vx + vy * vy + vz * vz)
     vx, vy, vz = vx / length, vy / length, vz / length
     sin_theta = math.sqrt(vx * vx + vy * vy)
@@ -233,8 +241,8 @@ def beckmann_visible_normal(wo, alpha: float, u0: float, u1: float):
             t = new
     s = erfinv(2.0 * open_unit(u1) - 1.0)
     # Rotate to wo's azimuth, unstretch the slopes, and form the normal.
-    mx = alpha * (cos_phi * t - sin_phi * s)
-    my = alpha * (sin_phi * t + cos_phi * s)
+    mx = alpha_x * (cos_phi * t - sin_phi * s)
+    my = alpha_y * (sin_phi * t + cos_phi * s)
     inv = 1.0 / math.sqrt(mx * mx + my * my + 1.0)
     return (mx * inv, my * inv, inv)
 
@@ -295,6 +303,74 @@ def sample_reflection(wo, alpha: float, distribution: int, u0: float, u1: float)
     if not p > 0.0:
         return wi, 0.0, 0.0
     return wi, p, g1(wi[2], alpha, distribution)
+
+
+# ---------------------------------------------------------------------------------------------
+# Anisotropic roughness: alpha_x along the shading frame's s (local x), alpha_y along t (y)
+#
+# Heitz 2014 ("Understanding the masking-shadowing function in microfacet-based BRDFs", JCGT
+# 3(2), sec. 5.3): stretching the microsurface by (alpha_x, alpha_y) maps it to the isotropic
+# alpha = 1 one, so D has the slope term (h_x / alpha_x)^2 + (h_y / alpha_y)^2 in place of
+# tan^2 / alpha^2, and a direction's Lambda is the isotropic one at its projected roughness
+# (``projected_alpha``). Mitsuba 3.9.1 (include/mitsuba/render/microfacet.h) writes D, G1 and
+# the visible-normal warp the same way.
+
+
+@jit
+def projected_alpha(w, alpha_x: float, alpha_y: float) -> float:
+    """The roughness the direction ``w`` (local, unit) sees: sqrt(alpha_x^2 cos^2 phi +
+    alpha_y^2 sin^2 phi); alpha_x along the normal itself, where phi has no meaning and Lambda
+    is 0 whatever it is."""
+    sin2 = w[0] * w[0] + w[1] * w[1]
+    if not sin2 > 0.0:
+        return alpha_x
+    return math.sqrt((alpha_x * alpha_x * w[0] * w[0] + alpha_y * alpha_y * w[1] * w[1]) / sin2)
+
+
+@jit
+def d_anisotropic(h, alpha_x: float, alpha_y: float, distribution: int) -> float:
+    """D(h) of either distribution for a unit half vector h above the surface."""
+    x2 = (h[0] / alpha_x) * (h[0] / alpha_x)
+    y2 = (h[1] / alpha_y) * (h[1] / alpha_y)
+    z2 = h[2] * h[2]
+    if distribution == BECKMANN:
+        return math.exp(-(x2 + y2) / z2) / (math.pi * alpha_x * alpha_y * z2 * z2)
+    denom = x2 + y2 + z2
+    return 1.0 / (math.pi * alpha_x * alpha_y * denom * denom)
+
+
+@jit
+def anisotropic_value_and_pdf(wo, wi, alpha_x: float, alpha_y: float, distribution: int):
+    """:func:`reflection_value_and_pdf` of the anisotropic distribution: ``(D G1(wo) G1(wi) /
+    (4 cos_o cos_i), G1(wo) D / (4 cos_o))``, both 0 unless wo and wi are above the surface."""
+    cos_o, cos_i = wo[2], wi[2]
+    if cos_o <= 0.0 or cos_i <= 0.0:
+        return 0.0, 0.0
+    hx, hy, hz = wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]
+    length = math.sqrt(hx * hx + hy * hy + hz * hz)
+    d = d_anisotropic((hx / length, hy / length, hz / length), alpha_x, alpha_y, distribution)
+    g1_o = g1(cos_o, projected_alpha(wo, alpha_x, alpha_y), distribution)
+    g1_i = g1(cos_i, projected_alpha(wi, alpha_x, alpha_y), distribution)
+    p = g1_o * d / (4.0 * cos_o)
+    return p * g1_i / cos_i, p
+
+
+@jit
+def sample_anisotropic_reflection(wo, alpha_x: float, alpha_y: float, distribution: int, u0: float,
+                                  u1: float):
+    """:func:`sample_reflection` of the anisotropic distribution: ``(wi, pdf, g1_i)``."""
+    if distribution == BECKMANN:
+        h = beckmann_visible_normal_anisotropic(wo, alpha_x, alpha_y, u0, u1)
+    else:
+        h = warp.ggx_visible_normal_anisotropic(wo, alpha_x, alpha_y, u0, u1)
+    wo_dot_h = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2]
+    wi = (2.0 * wo_dot_h * h[0] - wo[0], 2.0 * wo_dot_h * h[1] - wo[1], 2.0 * wo_dot_h * h[2] - wo[2])
+    if wi[2] <= 0.0 or wo_dot_h <= 0.0:
+        return wi, 0.0, 0.0
+    p = anisotropic_value_and_pdf(wo, wi, alpha_x, alpha_y, distribution)[1]
+    if not p > 0.0:
+        return wi, 0.0, 0.0
+    return wi, p, g1(wi[2], projected_alpha(wi, alpha_x, alpha_y), distribution)
 
 
 @jit

@@ -13,7 +13,16 @@ reflectance    3      scale per channel, in [0, 1] (Mitsuba's ``specular_reflect
 alpha          1      roughness, in (0, 10]
 eta, k         3, 3   complex index of refraction per channel (``conductor``)
 distribution   1      ``ggx`` (default) or ``beckmann``
+alpha_v        1      roughness along the shading frame's t axis; 0 (default):
+                      isotropic, ``alpha`` both ways. Otherwise ``alpha`` is
+                      the roughness along s, Mitsuba's ``alpha_u``
 =============  =====  ========================================================
+
+Anisotropic roughness (``alpha_v`` > 0) depends on which way the surface's tangent points: the
+material is then shaded in Mitsuba's frame, s along dp/du (``oriented``; the kernels build the
+frame as ``tracer.textures.shading_frames`` does for normal maps) and evaluated by the
+anisotropic functions of ``microfacet``. An isotropic row takes the isotropic functions, so
+its values keep their bits.
 """
 
 from __future__ import annotations
@@ -34,15 +43,30 @@ TYPE = register(MaterialType(module=__name__, rank=CODE, name=
                   texture=True, doc="roughness, used as given"),
             replace(ETA_PARAM, late=True), replace(K_PARAM, late=True),
             Param("distribution", 1, default="ggx", choices=microfacet.DISTRIBUTIONS, late=True,
-                  doc="microfacet distribution"))))
+                  doc="microfacet distribution"),
+            Param("alpha_v", 1, lo=0.0, hi=microfacet.MAX_ALPHA, default=0.0, texture=True, late=True,
+                  doc="roughness along the tangent t (alpha is then along s, dp/du); 0: isotropic")),
+    oriented=lambda values: float(values["alpha_v"]) > 0.0))
 REFLECTANCE, ALPHA, ETA, K = (TYPE.column(n) for n in ("reflectance", "alpha", "eta", "k"))
-DISTRIBUTION = TYPE.column("distribution")
+DISTRIBUTION, ALPHA_V = TYPE.column("distribution"), TYPE.column("alpha_v")
+
+
+@jit
+def _alpha_v(params, row) -> float:
+    """The row's alpha_v, 0 for an isotropic row, else at least MIN_ALPHA (a texture's lookup
+    is clamped into [0, MAX_ALPHA], the parameter's range, and may be smaller)."""
+    alpha_v = params[row, ALPHA_V]
+    return max(alpha_v, microfacet.MIN_ALPHA) if alpha_v > 0.0 else 0.0
 
 
 @jit
 def eval_pdf(params, row, wo, wi):
     """(f, pdf): reflectance x Fresnel x the microfacet reflector, and the visible-normal pdf."""
-    value, p = microfacet.reflection_value_and_pdf(wo, wi, params[row, ALPHA], int(params[row, DISTRIBUTION]))
+    alpha, alpha_v, distribution = params[row, ALPHA], _alpha_v(params, row), int(params[row, DISTRIBUTION])
+    if alpha_v > 0.0:
+        value, p = microfacet.anisotropic_value_and_pdf(wo, wi, alpha, alpha_v, distribution)
+    else:
+        value, p = microfacet.reflection_value_and_pdf(wo, wi, alpha, distribution)
     if not value > 0.0:
         return (0.0, 0.0, 0.0), p
     f = fresnel_rgb(params, row, ETA, K, microfacet.wo_dot_half(wo, wi))
@@ -53,7 +77,11 @@ def eval_pdf(params, row, wo, wi):
 @jit
 def sample(params, row, wo, u_lobe, u0, u1):
     """wi = reflect(wo, h) with h from the visible normals; weight = reflectance F G1(wi)."""
-    wi, p, g1 = microfacet.sample_reflection(wo, params[row, ALPHA], int(params[row, DISTRIBUTION]), u0, u1)
+    alpha, alpha_v, distribution = params[row, ALPHA], _alpha_v(params, row), int(params[row, DISTRIBUTION])
+    if alpha_v > 0.0:
+        wi, p, g1 = microfacet.sample_anisotropic_reflection(wo, alpha, alpha_v, distribution, u0, u1)
+    else:
+        wi, p, g1 = microfacet.sample_reflection(wo, alpha, distribution, u0, u1)
     if not p > 0.0:
         return wi, (0.0, 0.0, 0.0), 0.0, 0
     f = fresnel_rgb(params, row, ETA, K, microfacet.wo_dot_half(wo, wi))

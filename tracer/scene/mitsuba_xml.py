@@ -16,6 +16,7 @@ type, film format, clipping planes) is read and told in one line through ``notif
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -1077,6 +1078,9 @@ class _SceneReader:
             if not tiltable(materials.TYPES[type_name]):
                 naming.fail(f"a {p.type} around {type_name} is not supported (tracer tilts the frame of "
                             "materials that only reflect)", bsdf)
+            if p.type == "bumpmap" and "alpha_v" in values:
+                # Mitsuba's bump frame takes its s from the untilted dp/du in mixed coordinates.
+                naming.fail("a bumpmap around anisotropic roughness is not supported (give one alpha)", bsdf)
             return ident or inner_id, plugin, type_name, values, twosided, opacity, tilt
         if p.type == "twosided":
             nested = p.nested("bsdf")
@@ -1235,7 +1239,7 @@ class _SceneReader:
             values = {"reflectance": self.colour(p, "specular_reflectance", 1.0, "reflectance", hi=1.0),
                       "eta": eta, "k": k}
             if kind == "roughconductor":
-                values.update(self.roughness(p))
+                values.update(self.roughness(p, anisotropic=True))
         elif kind in ("plastic", "roughplastic"):
             values = {
                 "diffuse_reflectance": self.colour(p, "diffuse_reflectance", 0.5, "reflectance", hi=1.0),
@@ -1315,9 +1319,10 @@ class _SceneReader:
         p._check(element, value, plastic.MIN_IOR, plastic.MAX_IOR)
         return value
 
-    def roughness(self, p: _Plugin) -> dict[str, object]:
-        """distribution and alpha (isotropic: alpha, or alpha_u equal to alpha_v); clamped to at
-        least MIN_ALPHA as Mitsuba's distributions clamp it."""
+    def roughness(self, p: _Plugin, anisotropic: bool = False) -> dict[str, object]:
+        """distribution and alpha, and with ``anisotropic`` (a type with ``alpha_v``:
+        roughconductor) alpha_v where alpha_u and alpha_v differ (alpha is then alpha_u);
+        clamped to at least MIN_ALPHA as Mitsuba's distributions clamp them."""
         distribution = (p.string("distribution", "beckmann") or "").lower()
         if distribution not in ("beckmann", "ggx"):
             p.props["distribution"].fail("distribution: expected beckmann or ggx, got "
@@ -1326,28 +1331,29 @@ class _SceneReader:
             return p.has(name) or any(obj.tag == "texture" and written.attrs.get("name") == name
                                       for obj, written in p.objects)
 
+        alpha_v = None
         if given("alpha_u") or given("alpha_v"):
             if given("alpha"):
                 p.fail("give alpha or alpha_u and alpha_v, not both")
             if not (given("alpha_u") and given("alpha_v")):
                 p.fail("alpha_u and alpha_v go together")
-            alpha_u = self.textured(p, "alpha_u", lambda: self.scalar(p, "alpha_u", 0.1), "other")
+            alpha = self.textured(p, "alpha_u", lambda: self.scalar(p, "alpha_u", 0.1), "other")
             alpha_v = self.textured(p, "alpha_v", lambda: self.scalar(p, "alpha_v", 0.1), "other")
-            if isinstance(alpha_u, Texture) or isinstance(alpha_v, Texture):
-                if alpha_u is not alpha_v:
-                    p.fail("anisotropic roughness (alpha_u and alpha_v from textures) is not supported: "
-                           "tracer's microfacet materials are isotropic")
-            elif alpha_u != alpha_v:
-                p.fail(f"anisotropic roughness (alpha_u {alpha_u:g}, alpha_v {alpha_v:g}) is not supported: "
-                       "tracer's microfacet materials are isotropic")
-            alpha = alpha_u
+            same = alpha is alpha_v or (not isinstance(alpha, Texture) and not isinstance(alpha_v, Texture)
+                                        and alpha == alpha_v)
+            if same:
+                alpha_v = None
+            elif not anisotropic:
+                p.fail(f"anisotropic roughness (alpha_u and alpha_v) on {p.type} is not supported (tracer "
+                       "reads it on roughconductor)")
         else:
             alpha = self.textured(p, "alpha", lambda: self.scalar(p, "alpha", 0.1), "other")
         if not p.boolean("sample_visible", True):
             self.notes.append(f"{p.element.where}: sample_visible false (tracer samples visible normals)")
-        # A textured alpha is clamped per lookup, into the parameter's range (tracer.textures).
-        return {"distribution": distribution,
-                "alpha": alpha if isinstance(alpha, Texture) else max(alpha, MIN_ALPHA)}
+        out: dict[str, object] = {"distribution": distribution, "alpha": _at_least(alpha, MIN_ALPHA)}
+        if alpha_v is not None:
+            out["alpha_v"] = _at_least(alpha_v, MIN_ALPHA)
+        return out
 
     @staticmethod
     def scalar(p: _Plugin, name: str, default: float) -> float:
@@ -1392,6 +1398,20 @@ class _SceneReader:
         return g.scene(self.document.path, camera, table, self.positions, self.intensities, self.render,
                        self.environment, spots=self.spots, directionals=self.directionals,
                        images=self.point_images)
+
+
+def _at_least(value: "Texture | float", lo: float) -> "Texture | float":
+    """A roughness clamped to at least ``lo``: a number, or a texture whose texels (colours) below
+    it are raised to it. Mitsuba clamps the looked-up value; clamping the texels instead differs
+    only where a bilinear lookup blends texels below ``lo`` with others (by less than ``lo``)."""
+    if not isinstance(value, Texture):
+        return max(value, lo)
+    if value.kind == "mesh_attribute" or value.value_range()[0] >= lo:  # an attribute: read later
+        return value
+    if value.kind == "checkerboard":
+        return dataclasses.replace(value, color0=np.maximum(value.color0, lo),
+                                   color1=np.maximum(value.color1, lo))
+    return dataclasses.replace(value, pixels=np.maximum(value.pixels, np.asarray(lo, dtype=value.pixels.dtype)))
 
 
 def _constant_texture(rgb: np.ndarray, where: str) -> Texture:

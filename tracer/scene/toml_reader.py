@@ -23,7 +23,7 @@ from ..camera import ORTHOGRAPHIC, PERSPECTIVE, PROJECTIONS, Camera
 from ..errors import InputError
 from ..inputfiles import read_regular_file
 from ..record import MAX_SAMPLE_INDEX
-from ..textures import FILTERS, WRAPS, Perturbation, Texture, TextureTable, bind, tiltable
+from ..textures import BUMP_MAP, FILTERS, WRAPS, Perturbation, Texture, TextureTable, bind, tiltable
 from ..textures.bitmap import read_texels
 from . import keys
 from .environment import Environment, rotation_problem
@@ -529,6 +529,7 @@ class _Geometry:
             if shape.emissive and cutout:
                 raise InputError(f"shape {i + 1} emits, and its material '{table.names[shape.material]}' "
                                  "has an opacity (a mask): tracer's emitters are opaque", path)
+        self.orient(path, table)
         omni = (np.array([0.0, 0.0, 1.0]), 180.0, 180.0)
         spots = spots if spots is not None else [omni] * len(point_position)
         directionals = directionals or []
@@ -563,6 +564,23 @@ class _Geometry:
             directional_direction=np.array([d[0] for d in directionals], dtype=np.float64).reshape(-1, 3),
             directional_irradiance=_float32([d[1] for d in directionals]).reshape(-1, 3),
         )
+
+    def orient(self, path: str, table: materials.MaterialTable) -> None:
+        """Mark the material rows whose value depends on the tangent (``MaterialType.oriented``:
+        anisotropic roughness) to be shaded in Mitsuba's frame of dp/du (``TextureTable.frames``).
+        Under a bump map that frame is not Mitsuba's (``tracer.textures.shading_frames``):
+        refused."""
+        types = materials.BY_CODE
+        for row, code in enumerate(table.kind):
+            kind = types[int(code)] if int(code) != materials.NONE else None
+            if kind is None or kind.oriented is None or not kind.oriented(kind.values(table.params[row])):
+                continue
+            tilt = self.textures.perturbations.get(row)
+            if tilt is not None and tilt[0] == BUMP_MAP:
+                raise InputError(f"material '{table.names[row]}' ({kind.name}) has anisotropic roughness "
+                                 "under a bump map, which tracer does not support (give one alpha)", path)
+            if tilt is None:
+                self.textures.frames.add(row)
 
     def vertices(self) -> np.ndarray:
         return np.concatenate(self._vertices) if self._vertices else np.zeros((0, 3))

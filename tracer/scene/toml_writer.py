@@ -45,7 +45,7 @@ def write_scene(scene: Scene, path: str | os.PathLike[str], source: str | None =
     (an earlier conversion's) and must not be one the scene itself reads (``_inputs``), so that
     converting never overwrites an input or a user's own file. Raises InputError if the scene
     cannot be written as TOML."""
-    if scene.textures:
+    if scene.textures.textured:
         # The TOML format has no textures yet: writing their means would render another image.
         names = sorted({b.param for b in scene.textures.bindings}
                        | ({"opacity"} if scene.textures.cutouts else set())

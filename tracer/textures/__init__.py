@@ -54,10 +54,12 @@ WRAPS = ("repeat", "mirror", "clamp")
 KIND, TO_UV, FILTER, WRAP, WIDTH, HEIGHT, OFFSET, COLOR0, COLOR1 = 0, 1, 7, 8, 9, 10, 11, 12, 15
 INFO_WIDTH = 18
 # Columns of a material row's perturbation in ``Textures.perturb`` (float64): its kind (0 none,
-# NORMAL_MAP, BUMP_MAP), its texture, a bump map's scale, and Mitsuba's two switches.
+# NORMAL_MAP, BUMP_MAP, or FRAME: no tilt, but shaded in Mitsuba's frame of dp/du, for a material
+# whose value depends on the tangent: ``MaterialType.oriented``), its texture, a bump map's
+# scale, and Mitsuba's two switches.
 PERTURB_KIND, PERTURB_TEXTURE, PERTURB_SCALE, PERTURB_FLIP, PERTURB_SHADOWING = 0, 1, 2, 3, 4
 PERTURB_WIDTH = 5
-NORMAL_MAP, BUMP_MAP = 1, 2
+NORMAL_MAP, BUMP_MAP, FRAME = 1, 2, 3
 PERTURBATIONS = {"normalmap": NORMAL_MAP, "bumpmap": BUMP_MAP}
 # Rec. 709 luminance, as Mitsuba's ``luminance`` (include/mitsuba/core/spectrum.h).
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
@@ -208,22 +210,30 @@ class Textures(NamedTuple):
 class TextureTable:
     """A scene's textures and what they feed: material parameters (``bindings``), the
     opacity of material rows (``cutouts``: row -> texture index) and their shading frames
-    (``perturbations``: row -> (kind code, texture index, scale, flip_invalid, shadowing))."""
+    (``perturbations``: row -> (kind code, texture index, scale, flip_invalid, shadowing)), and
+    the rows shaded in Mitsuba's frame of dp/du without a map (``frames``: anisotropic
+    materials, ``MaterialType.oriented``)."""
 
     textures: list[Texture] = field(default_factory=list)
     bindings: list[Binding] = field(default_factory=list)
     cutouts: dict[int, int] = field(default_factory=dict)
     perturbations: dict[int, tuple[int, int, float, bool, bool]] = field(default_factory=dict)
+    frames: set[int] = field(default_factory=set)
 
     def __bool__(self) -> bool:
-        """Whether anything is textured (then the scene keeps its texture coordinates)."""
+        """Whether anything reads texture coordinates (then the scene keeps them)."""
+        return bool(self.bindings or self.cutouts or self.perturbations or self.frames)
+
+    @property
+    def textured(self) -> bool:
+        """Whether any texture is used (``frames`` alone use none: a TOML file holds them)."""
         return bool(self.bindings or self.cutouts or self.perturbations)
 
     @property
     def shading(self) -> bool:
         """Whether a lookup happens during shading (a bound parameter or a perturbed frame):
         what the kernels' ``TEXTURES`` switch is for. Opacity alone is read by the cutouts."""
-        return bool(self.bindings or self.perturbations)
+        return bool(self.bindings or self.perturbations or self.frames)
 
     def add(self, texture: Texture) -> int:
         """The index of ``texture`` in the table, added unless it is there (the same object)."""
@@ -278,6 +288,8 @@ class TextureTable:
         for row, texture in self.cutouts.items():
             opacity[row] = texture
         perturb = np.zeros((material_count, PERTURB_WIDTH))
+        for row in self.frames:
+            perturb[row, PERTURB_KIND] = FRAME
         for row, values in self.perturbations.items():
             perturb[row] = values
         return Textures(info, pixels, bindings, first, opacity,
@@ -303,6 +315,8 @@ class TextureTable:
             h.update(f"opacity {row} {texture}\0".encode())
         for row, values in sorted(self.perturbations.items()):  # none before normal maps
             h.update(f"perturb {row} {values!r}\0".encode())
+        for row in sorted(self.frames):  # none before anisotropic roughness
+            h.update(f"frame {row}\0".encode())
         return h.digest()
 
 

@@ -15,7 +15,11 @@ multiplying each sample's value by ``factor``:
   frame's x axis orthogonal to it;
 - a bump map tilts dp/du and dp/dv by ``scale`` times the height field's gradient along the
   unperturbed normal; the tilted normal is their cross product, turned to the face normal's
-  side. Only that normal matters to tracer's materials, which are all isotropic;
+  side; its s is the tilted frame's ``basis`` (Mitsuba's is the untilted dp/du made orthogonal
+  to the tilted normal in mixed coordinates, so an anisotropic material under a bump map is
+  refused by the readers);
+- a material whose value depends on the tangent (anisotropic roughness) and has no map is
+  shaded in the unperturbed frame itself (kind ``FRAME``);
 - with ``flip_invalid`` a tilted normal facing away from the viewer is mirrored about the
   unperturbed normal (its x and y negated);
 - a sample counts only in the hemisphere both normals share (wi . n and wi . n' of one sign),
@@ -40,6 +44,7 @@ from . import (
     BILINEAR,
     BITMAP,
     FILTER,
+    FRAME,
     HEIGHT,
     KIND,
     LUMINANCE,
@@ -138,7 +143,7 @@ def _luminance(pixels, offset: int, width: int, i: int, j: int) -> float:
 @jit
 def perturbed(textures, row: int, hit_table, first_sphere: int, corner_normals, p: int, x, d, normal):
     """The tilted frame of a hit of primitive ``p`` at ``x`` (ray direction ``d``) whose
-    material row ``row`` has a normal or bump map and whose shading normal (toward the viewer)
+    material row ``row`` has a normal or bump map (or ``FRAME``: the unperturbed frame) and whose shading normal (toward the viewer)
     is ``normal``: ``(reflects, normal', s', t', wo', a2)``, with wo' the direction toward the
     viewer in the tilted frame and a2 the shadowing term's a² (0 without shadowing). reflects
     is False where the viewer is below the tilted frame (tracer's materials, one-sided there,
@@ -162,6 +167,8 @@ def perturbed(textures, row: int, hit_table, first_sphere: int, corner_normals, 
     t = cross(front, s)
     # The frame (s, t, normal): mirrored (left-handed) from behind, as Mitsuba's twosided.
     wo = to_local(s, t, normal, scale(-1.0, d))
+    if kind == FRAME:  # no map: the frame itself, for a material whose value depends on s
+        return wo[2] > 0.0, normal, s, t, wo, 0.0
     u, v = uv_at(textures, hit_table, first_sphere, p, x)
     if kind == NORMAL_MAP:
         r, g, b = value_at(textures, t_index, False, hit_table, p, x, u, v)
