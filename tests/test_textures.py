@@ -362,3 +362,22 @@ def test_flip_v_turns_a_mesh_files_coordinates(tmp_path):
     for flip, expected in ((False, [0, 0.25, 1, 0, 0, 1]), (True, [0, 0.75, 1, 1, 0, 0])):
         scene = _toml(tmp_path, material, {"type": "mesh", "file": "tri.obj", "material": "m", "flip_v": flip})
         np.testing.assert_allclose(scene.corner_uv, [expected])
+
+
+def test_rawconstant_is_its_value_everywhere(tmp_path):
+    """Mitsuba's ``rawconstant``: a vector (or one number for all three channels) used as it is,
+    with no sRGB decoding: the bound texture is one texel of that value; to_uv and a missing
+    value are refused in one line."""
+    scene = _load(tmp_path, '<shape type="rectangle"><bsdf type="diffuse"><texture name="reflectance" '
+                  'type="rawconstant"><vector name="value" value="0.2, 0.5, 0.8"/></texture></bsdf></shape>')
+    (texture,) = scene.textures.textures
+    np.testing.assert_array_equal(texture.pixels.reshape(3), np.float32([0.2, 0.5, 0.8]))
+    grey = _load(tmp_path, '<shape type="rectangle"><bsdf type="diffuse"><texture name="reflectance" '
+                 'type="rawconstant"><float name="value" value="0.25"/></texture></bsdf></shape>')
+    np.testing.assert_array_equal(grey.textures.textures[0].pixels.reshape(3), np.float32([0.25] * 3))
+    for body, words in (('<float name="value" value="0.2"/><transform name="to_uv"><scale value="2"/>'
+                         '</transform>', "no to_uv"), ("", "missing property 'value'")):
+        with pytest.raises(InputError, match=words) as caught:
+            _load(tmp_path, '<shape type="rectangle"><bsdf type="diffuse"><texture name="reflectance" '
+                  f'type="rawconstant">{body}</texture></bsdf></shape>')
+        assert "\n" not in str(caught.value)

@@ -1178,9 +1178,24 @@ class _SceneReader:
             # what a float64 product of them can hold.
             scale = p.float("scale", 1.0, lo=-1e15, hi=1e15)
             texture = Texture("mesh_attribute", attribute=name, scale=scale, source=element.where)
+        elif p.type == "rawconstant":
+            # Mitsuba's rawconstant (src/spectra/rawconstant.cpp): one number or a 3-vector,
+            # returned as it is in any colour mode (no spectral upsampling, no sRGB decoding).
+            element_value = p.prop("value", ("float", "integer", "vector", "point"))
+            if element_value is None:
+                p.fail("missing property 'value'")
+            if element_value.tag in ("vector", "point"):
+                value = xyz(element_value, None, "value")
+            else:
+                value = np.full(3, number(element_value, element_value.attr("value"), "value"))
+            if not np.all(np.isfinite(value)) or np.max(np.abs(value)) > MAX_RADIANCE:
+                element_value.fail(f"value: expected finite numbers within +-{MAX_RADIANCE:g}", element)
+            if to_uv is not None:
+                p.props["to_uv"].fail("a rawconstant texture has no to_uv (it is the same everywhere)", element)
+            texture = _constant_texture(value, element.where)
         else:
-            p.fail(f"texture '{shown(p.type)}' is not supported; tracer reads bitmap, checkerboard and "
-                   "mesh_attribute")
+            p.fail(f"texture '{shown(p.type)}' is not supported; tracer reads bitmap, checkerboard, "
+                   "mesh_attribute and rawconstant")
         if to_uv is not None:
             texture.to_uv = np.array([[to_uv[0, 0], to_uv[0, 1], to_uv[0, 3]],
                                       [to_uv[1, 0], to_uv[1, 1], to_uv[1, 3]]])
