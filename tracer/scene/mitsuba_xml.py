@@ -1191,7 +1191,8 @@ class _SceneReader:
             if not np.all(np.isfinite(value)) or np.max(np.abs(value)) > MAX_RADIANCE:
                 element_value.fail(f"value: expected finite numbers within +-{MAX_RADIANCE:g}", element)
             if to_uv is not None:
-                p.props["to_uv"].fail("a rawconstant texture has no to_uv (it is the same everywhere)", element)
+                p.props["to_uv"].fail("a rawconstant texture has no to_uv (it is the same everywhere)",
+                                      element)
             texture = _constant_texture(value, element.where)
         else:
             p.fail(f"texture '{shown(p.type)}' is not supported; tracer reads bitmap, checkerboard, "
@@ -1426,7 +1427,8 @@ def _at_least(value: "Texture | float", lo: float) -> "Texture | float":
     if value.kind == "checkerboard":
         return dataclasses.replace(value, color0=np.maximum(value.color0, lo),
                                    color1=np.maximum(value.color1, lo))
-    return dataclasses.replace(value, pixels=np.maximum(value.pixels, np.asarray(lo, dtype=value.pixels.dtype)))
+    floor = np.asarray(lo, dtype=value.pixels.dtype)
+    return dataclasses.replace(value, pixels=np.maximum(value.pixels, floor))
 
 
 def _constant_texture(rgb: np.ndarray, where: str) -> Texture:

@@ -145,9 +145,10 @@ def perturbed(textures, row: int, hit_table, first_sphere: int, corner_normals, 
     """The tilted frame of a hit of primitive ``p`` at ``x`` (ray direction ``d``) whose
     material row ``row`` has a normal or bump map (or ``FRAME``: the unperturbed frame) and whose
     shading normal (toward the viewer) is ``normal``: ``(reflects, normal', s', t', wo', a2)``,
-    with wo' the direction toward the viewer in the tilted frame and a2 the shadowing term's a² (0 without shadowing). reflects
-    is False where the viewer is below the tilted frame (tracer's materials, one-sided there,
-    reflect nothing; Mitsuba's evaluate to 0) or the map gives no direction."""
+    with wo' the direction toward the viewer in the tilted frame and a2 the shadowing term's a²
+    (0 without shadowing). reflects is False where the viewer is below the tilted frame
+    (tracer's materials, one-sided there, reflect nothing; Mitsuba's evaluate to 0) or the map
+    gives no direction."""
     perturb = textures.perturb
     kind = int(perturb[row, PERTURB_KIND])
     t_index = int(perturb[row, PERTURB_TEXTURE])
