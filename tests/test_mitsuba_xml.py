@@ -868,16 +868,16 @@ def test_ior_names_are_mitsubas():
 
 
 @pytest.mark.parametrize("bsdf, words", [
-    ('<bsdf type="roughdielectric" id="glass"><texture type="checkerboard" name="alpha"/></bsdf>',
-     ['<bsdf type="roughdielectric" id="glass">', "textured roughness on a roughdielectric"]),
+    ('<bsdf type="roughdielectric" id="glass"><texture type="checkerboard" name="specular_transmittance"/>'
+     '</bsdf>', ["specular_transmittance", "is not expected inside"]),
     ('<bsdf type="dielectric"><float name="int_ior" value="0"/></bsdf>', ["int_ior", ">= 0.01, got 0"]),
     ('<bsdf type="thindielectric"><string name="ext_ior" value="glas"/></bsdf>', ["unknown IOR name 'glas'"]),
     ('<bsdf type="principled"/>', ["bsdf 'principled' is not supported"]),
     ('<bsdf type="twosided"><bsdf type="diffuse"/><bsdf type="plastic"/></bsdf>', ["two different BSDFs"]),
     ('<bsdf type="twosided"/>', ["one nested bsdf"]),
     ('<bsdf type="twosided"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>', ["twosided inside"]),
-    ('<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/>'
-     '</bsdf>', ["anisotropic roughness"]),
+    ('<bsdf type="roughplastic"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/>'
+     '</bsdf>', ["anisotropic roughness", "on roughplastic"]),
     ('<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/></bsdf>', ["go together"]),
     ('<bsdf type="roughconductor"><float name="alpha" value="0.1"/><float name="alpha_u" value="0.1"/>'
      '<float name="alpha_v" value="0.1"/></bsdf>', ["alpha or alpha_u"]),

@@ -129,3 +129,29 @@ def test_refraction_obeys_generalized_reciprocity():
     nonzero = outside > 1e-12
     assert nonzero.mean() > 0.05  # most random pairs have no microfacet between them (sides disagree)
     np.testing.assert_allclose(outside[nonzero] * eta * eta, inside[nonzero], rtol=1e-9)
+
+
+def test_a_textured_roughness_is_read_from_both_sides(tmp_path):
+    """A roughdielectric's textured alpha feeds its outside row and its inside row (the row a
+    hit from behind shades with, ``MaterialTable.shading``): both read the same texture, as
+    Mitsuba's one BSDF does, so a refraction out of the glass sees the roughness there."""
+    import tracer
+    from tracer.estimator import DirectLighting
+    from tracer.materials import roughdielectric
+    from tracer.strategy import Strategy
+
+    path = tmp_path / "glass.xml"
+    path.write_text('<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm"><integer '
+                    'name="width" value="4"/><integer name="height" value="4"/></film></sensor>'
+                    '<shape type="sphere"><bsdf type="roughdielectric"><texture name="alpha" '
+                    'type="checkerboard"><float name="color0" value="0.05"/><float name="color1" '
+                    'value="0.5"/></texture></bsdf></shape><emitter type="point"/></scene>')
+    scene = tracer.load_scene(path)
+    surfaces = DirectLighting(scene, Strategy.from_options("mis")).surfaces
+    row = int(scene.sphere_material[0])
+    inside = int(surfaces.behind[row])
+    assert inside >= len(scene.materials.kind)
+    textures = surfaces.textures
+    for r in (row, inside):
+        first, last = textures.first_binding[r], textures.first_binding[r + 1]
+        assert last - first == 1 and textures.bindings[first, 0] == roughdielectric.ALPHA

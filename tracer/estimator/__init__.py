@@ -82,11 +82,14 @@ class DirectLighting:
             if self.combiner.resamples and strategy.direction_count else None
         types = plugins.by_code("material")
         kind, params, behind = scene.materials.shading(types)
+        own = len(scene.materials.kind)  # rows after these are inside rows (MaterialTable.shading)
         transmits = np.array([getattr(types.get(int(k)), "transmits", False) for k in kind], dtype=np.bool_)
         self.surfaces = Surfaces(np.ascontiguousarray(scene.hit_table), kind, params, behind,
                                  float(scene.ray_epsilon), int(scene.triangle_count),
                                  np.ascontiguousarray(scene.corner_normals),
-                                 scene.textures.arrays(len(kind), scene.corner_uv, scene.sphere_frame),
+                                 scene.textures.arrays(len(kind), scene.corner_uv, scene.sphere_frame,
+                                                       {int(behind[m]): m for m in range(own)
+                                                        if behind[m] >= own}),
                                  transmits)
         # Rows past the table's (a two-sided type's inside) are never a primitive's own row.
         opacity = np.ones(len(kind))

@@ -50,7 +50,7 @@ TYPE = register(MaterialType(module=__name__, rank=CODE, name="roughdielectric",
                     doc="rough glass: microfacet reflection and refraction (GGX or Beckmann)",
                     params=DIELECTRIC_PARAMS + (
                         Param("alpha", 1, lo=microfacet.MIN_ALPHA, hi=microfacet.MAX_ALPHA, default=0.1,
-                              doc="roughness, used as given"),
+                              texture=True, doc="roughness, used as given (the same on both sides)"),
                         Param("distribution", 1, default="beckmann", choices=microfacet.DISTRIBUTIONS,
                               doc="microfacet distribution")),
                     derived=(Param("eta", 1),), derive=relative_eta, behind=seen_from_inside,

@@ -1286,10 +1286,6 @@ class _SceneReader:
                 "ext_ior": self.ior(p, "ext_ior", "air")}
             if kind == "roughdielectric":
                 values.update(self.roughness(p))
-                if isinstance(values["alpha"], Texture):
-                    # Its inside row (the indices swapped) would need the texture bound too.
-                    p.fail("a textured roughness on a roughdielectric is not supported (give alpha as a "
-                           "number)")
         else:
             p.fail(f"bsdf '{shown(kind)}' is not supported; tracer reads diffuse, conductor, roughconductor, "
                    "plastic, roughplastic, pplastic, dielectric, roughdielectric, thindielectric, twosided, "

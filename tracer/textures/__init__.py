@@ -36,6 +36,7 @@ column depends on except through a mean.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 from dataclasses import dataclass, field
@@ -258,8 +259,11 @@ class TextureTable:
         self.perturbations[row] = (PERTURBATIONS[p.kind], self.add(p.texture), float(p.scale),
                                    bool(p.flip_invalid), bool(p.shadowing))
 
-    def arrays(self, material_count: int, corner_uv: np.ndarray, sphere_frame: np.ndarray) -> Textures:
-        """The kernels' arrays (``Textures``) for a table of ``material_count`` materials."""
+    def arrays(self, material_count: int, corner_uv: np.ndarray, sphere_frame: np.ndarray,
+               copies: dict[int, int] | None = None) -> Textures:
+        """The kernels' arrays (``Textures``) for a table of ``material_count`` materials.
+        ``copies``: row -> the row whose bindings it takes too (a two-sided type's inside row,
+        ``MaterialTable.shading``, reads the textures of its outside)."""
         info = np.zeros((len(self.textures), INFO_WIDTH))
         pools, offset = [], 0
         for row, t in zip(info, self.textures, strict=True):
@@ -278,7 +282,9 @@ class TextureTable:
             row[WIDTH], row[HEIGHT], row[OFFSET] = width, height, offset
             pools.append(np.ascontiguousarray(t.pixels, dtype=np.float32).ravel())
             offset += pools[-1].size
-        ordered = sorted(self.bindings, key=lambda b: b.material)
+        copied = [dataclasses.replace(b, material=row) for row, source in (copies or {}).items()
+                  for b in self.bindings if b.material == source]
+        ordered = sorted(self.bindings + copied, key=lambda b: b.material)
         bindings = np.array([[b.column, b.size, b.texture, b.lo, b.hi] for b in ordered],
                             dtype=np.float64).reshape(-1, 5)
         counts = np.bincount([b.material for b in ordered], minlength=material_count)
