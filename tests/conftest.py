@@ -75,3 +75,25 @@ def write_scene(tmp_path):
         return path
 
     return write
+
+
+SPHERE_XML = """<scene version="3.0.0">
+  <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="4"/>
+    <integer name="height" value="4"/></film></sensor>
+  <shape type="sphere">{bsdf}</shape>
+  <emitter type="point"><point name="position" value="0, 0, 5"/></emitter>
+</scene>"""
+
+
+@pytest.fixture
+def sphere_with(tmp_path):
+    """sphere_with(bsdf) -> Scene: a Mitsuba scene file ``a.xml`` of one sphere whose BSDF is
+    the XML ``bsdf``, a point light and a 4x4 film, loaded."""
+    import tracer
+
+    def load(bsdf: str):
+        path = tmp_path / "a.xml"
+        path.write_text(SPHERE_XML.format(bsdf=bsdf))
+        return tracer.load_scene(path)
+
+    return load

@@ -160,24 +160,10 @@ def test_d_and_the_visible_normal_density_are_normalized(distribution):
     np.testing.assert_allclose(pdf, np.where(wi[:, 2] > 0.0, q(wi), 0.0), rtol=1e-9, atol=0)
 
 
-SCENE = """<scene version="3.0.0">
-  <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="4"/>
-    <integer name="height" value="4"/></film></sensor>
-  <shape type="sphere">{bsdf}</shape>
-  <emitter type="point"><point name="position" value="0, 0, 5"/></emitter>
-</scene>"""
-
-
-def load_xml(tmp_path, bsdf: str):
-    path = tmp_path / "a.xml"
-    path.write_text(SCENE.format(bsdf=bsdf))
-    return tracer.load_scene(path)
-
-
-def test_xml_and_toml_give_the_same_row_and_frame(tmp_path):
+def test_xml_and_toml_give_the_same_row_and_frame(sphere_with):
     """alpha_u and alpha_v in XML are alpha and alpha_v in TOML; the row is shaded in Mitsuba's
     frame (``TextureTable.frames``) either way, and an isotropic row is not."""
-    xml = load_xml(tmp_path, '<bsdf type="roughconductor"><float name="alpha_u" value="0.05"/>'
+    xml = sphere_with('<bsdf type="roughconductor"><float name="alpha_u" value="0.05"/>'
                    '<float name="alpha_v" value="0.3"/><string name="distribution" value="ggx"/></bsdf>')
     toml = tracer.load_scene({
         "camera": {"origin": [0, 0, 5], "target": [0, 0, 0], "fov": 40, "width": 4, "height": 4},
@@ -190,7 +176,7 @@ def test_xml_and_toml_give_the_same_row_and_frame(tmp_path):
         assert scene.materials.params[row, rc.ALPHA] == 0.05
         assert scene.materials.params[row, rc.ALPHA_V] == 0.3
         assert scene.textures.frames == {row}
-    iso = load_xml(tmp_path, '<bsdf type="roughconductor"><float name="alpha_u" value="0.2"/>'
+    iso = sphere_with('<bsdf type="roughconductor"><float name="alpha_u" value="0.2"/>'
                    '<float name="alpha_v" value="0.2"/></bsdf>')
     assert not iso.textures.frames and iso.materials.params[int(iso.sphere_material[0]), rc.ALPHA_V] == 0.0
 
@@ -204,11 +190,11 @@ def test_xml_and_toml_give_the_same_row_and_frame(tmp_path):
      '<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/>'
      '</bsdf></bsdf>', "bumpmap around anisotropic roughness"),
 ])
-def test_refusals_name_the_line(tmp_path, bsdf, words):
+def test_refusals_name_the_line(sphere_with, bsdf, words):
     from conftest import ROOT
 
     bumps = ROOT / "tracer/scenes/mitsuba/textures/bumps.png"
     with pytest.raises(InputError) as caught:
-        load_xml(tmp_path, bsdf.replace("{bumps}", str(bumps)))
+        sphere_with(bsdf.replace("{bumps}", str(bumps)))
     message = str(caught.value)
     assert words in message and "a.xml:" in message and "\n" not in message, message

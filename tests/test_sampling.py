@@ -300,6 +300,27 @@ def _random_parameters(kind, n: int, gen: np.random.Generator) -> dict[str, np.n
     return values
 
 
+def _composite_lanes(kind, n: int, gen: np.random.Generator) -> Materials:
+    """Lanes of a composite type (a blend): 60 blends of random weight (0 and 1 among them) whose
+    parts are random materials that only reflect, with random parameters, laid out as the
+    readers lay them out (``blendbsdf.parts``); lane i is a random one of them."""
+    from tracer.materials import blendbsdf
+    from tracer.textures import tiltable
+
+    leaves = sorted(t.name for t in materials.TYPES.values() if not t.composite and tiltable(t))
+    triples = []
+    for b in range(60):
+        parts = []
+        for _ in range(2):
+            leaf = materials.TYPES[leaves[gen.integers(len(leaves))]]
+            values = {name: v[0] for name, v in _random_parameters(leaf, 1, gen).items()}
+            parts.append((leaf.name, values))
+        weight = [0.0, 1.0][b] if b < 2 else float(gen.random())
+        triples += blendbsdf.parts(f"blend{b}", weight, *parts)
+    rows = 1 + 3 * gen.integers(0, 60, n)
+    return Materials(materials.table(triples), rows.astype(np.int64))
+
+
 @pytest.mark.parametrize("type_name", sorted(materials.TYPES))
 def test_every_material_keeps_the_interface_contract(type_name):
     """For every registered material type (a new one is tested here without a line of test
@@ -312,7 +333,8 @@ def test_every_material_keeps_the_interface_contract(type_name):
     kind = materials.TYPES[type_name]
     n = 50_000
     gen = rng(22, sorted(materials.TYPES).index(type_name))
-    b = Materials.per_lane(type_name, _random_parameters(kind, n, gen))
+    b = _composite_lanes(kind, n, gen) if kind.composite else Materials.per_lane(
+        type_name, _random_parameters(kind, n, gen))
     wo = random_upper(n, gen, zmin=0.01)
     s = b.sample(gen.random((n, 3)), wo)
     assert np.all(np.isfinite(s.weight)) and np.all(s.weight >= 0.0)

@@ -89,7 +89,8 @@ class DirectLighting:
                                  np.ascontiguousarray(scene.corner_normals),
                                  scene.textures.arrays(len(kind), scene.corner_uv, scene.sphere_frame,
                                                        {int(behind[m]): m for m in range(own)
-                                                        if behind[m] >= own}),
+                                                        if behind[m] >= own},
+                                                       [getattr(types.get(int(k)), "rows", 1) for k in kind]),
                                  transmits)
         # Rows past the table's (a two-sided type's inside) are never a primitive's own row.
         opacity = np.ones(len(kind))

@@ -31,6 +31,7 @@ from ..geometry import offset_origin
 from ..jit import jit
 from ..kernels import UNBOUND, kernel
 from ..lights import environment as environment_light
+from ..materials.base import MAX_MATERIAL_ROWS
 from ..samplers import dimensions
 from ..textures import FRAME, PERTURB_KIND, lookup, shading_frames
 from . import light_samples, shading_point
@@ -55,8 +56,9 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
                                      surfaces.eps)
     first_sphere, behind, corner_normals = surfaces.first_sphere, surfaces.behind, surfaces.corner_normals
     textures, transmits = surfaces.textures, surfaces.transmits
-    # A textured hit's material row, its textured columns set for that hit (``tracer.textures``).
-    scratch = np.empty((1, params.shape[1]))
+    # A textured hit's material rows (a blend's parts too), its textured columns set for that hit
+    # (``tracer.textures``).
+    scratch = np.empty((MAX_MATERIAL_ROWS, params.shape[1]))
     spheres = light_tables.spheres
     weight_sum, u_left = reservoirs.weight, reservoirs.u
     shadow_origin, shadow_dir, shadow_tmax = shadow.origin, shadow.dir, shadow.tmax

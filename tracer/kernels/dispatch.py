@@ -8,6 +8,8 @@ name                                       what
 ``material_eval_pdf(kind, params, row,     (f, pdf) of the material of code ``kind``: a generated chain of
 wo, wi)``, ``material_sample(kind,         ``if kind == CODE`` branches over the scene's material types
 params, row, wo, u_lobe, u0, u1)``         only (``tracer.materials``), black for any other code
+``part_eval_pdf``, ``part_sample``         the same chains over the non-composite types: a blend's parts
+                                           (``tracer.materials.blendbsdf``)
 ``technique_sample(code, rows, k, x, n,    (wi, dist, le, pdf, delta) and the pdf of the light technique of
 u0, u1)``, ``technique_pdf(code, rows,     ``code``: a generated chain over the techniques the scene's
 k, x, n, wi, dist)``                       emitters use (``tracer.lights.techniques``)
@@ -63,14 +65,23 @@ def fill(build: Build, features) -> None:
 
     materials = [plugins.get("material", name) for name in features.materials]
     for m in materials:
+        if m.composite:  # its functions are templates over the part chains below: this build's copies
+            module = _checked(m)
+            built = types.ModuleType(f"{module.__name__}__{build.key}")
+            for name in ("eval_pdf", "sample"):
+                _bind(build, built, name, getattr(module, name))
+            setattr(namespace, f"_material_{m.code}", built)
+            continue
         setattr(namespace, f"_material_{m.code}", _called(_checked(m), ("eval_pdf", "sample"))
                 if features.shared else _checked(m))
-    source.append(_chain("material_eval_pdf", "kind, params, row, wo, wi", "kind",
-                         [(m.code, f"_material_{m.code}.eval_pdf(params, row, wo, wi)") for m in materials],
-                         "(0.0, 0.0, 0.0), 0.0"))
-    source.append(_chain("material_sample", "kind, params, row, wo, u_lobe, u0, u1", "kind",
-                         [(m.code, f"_material_{m.code}.sample(params, row, wo, u_lobe, u0, u1)")
-                          for m in materials], "(0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0"))
+    # The parts of a composite material (a blend's two) are of the other types: chains over those.
+    for chain, over in (("material", materials), ("part", [m for m in materials if not m.composite])):
+        source.append(_chain(f"{chain}_eval_pdf", "kind, params, row, wo, wi", "kind",
+                             [(m.code, f"_material_{m.code}.eval_pdf(params, row, wo, wi)") for m in over],
+                             "(0.0, 0.0, 0.0), 0.0"))
+        source.append(_chain(f"{chain}_sample", "kind, params, row, wo, u_lobe, u0, u1", "kind",
+                             [(m.code, f"_material_{m.code}.sample(params, row, wo, u_lobe, u0, u1)")
+                              for m in over], "(0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0"))
 
     techniques = [plugins.get("light_technique", name) for name in features.light_techniques]
     for t in techniques:
@@ -87,7 +98,8 @@ def fill(build: Build, features) -> None:
     text = "".join(source)
     linecache.cache[filename] = (len(text), None, text.splitlines(True), filename)
     exec(compile(text, filename, "exec"), namespace.__dict__)
-    for name in ("material_eval_pdf", "material_sample", "technique_sample", "technique_pdf"):
+    for name in ("material_eval_pdf", "material_sample", "part_eval_pdf", "part_sample", "technique_sample",
+                 "technique_pdf"):
         setattr(namespace, name, jit_module.jit_generated(getattr(namespace, name)))
     namespace.source = text
 

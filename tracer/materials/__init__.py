@@ -18,6 +18,7 @@ dielectric        7     ``dielectric.py``: smooth glass, delta reflection and re
 thindielectric    8     ``thindielectric.py``: a thin pane, delta reflection and transmission
 roughdielectric   9     ``roughdielectric.py``: rough glass, microfacet reflection and refraction
 pplastic          10    ``pplastic.py``: rough specular plus Fresnel-attenuated diffuse (Mitsuba's)
+blendbsdf         11    ``blendbsdf.py``: a blend of two materials (composite: its parts are rows)
 ================  ====  ==============================================================
 
 ``microfacet.py`` holds what the rough types share (distributions, visible-normal sampling,

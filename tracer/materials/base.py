@@ -34,6 +34,8 @@ from ..plugins import Plugin
 
 # Lobe flags (a bit set): what a sampled lobe, or a material's lobes, are.
 DELTA, GLOSSY, DIFFUSE = 1, 2, 4
+# The most table rows one material takes (``MaterialType.rows``: a blend and its two parts).
+MAX_MATERIAL_ROWS = 3
 
 
 @dataclass(frozen=True)
@@ -103,6 +105,9 @@ class MaterialType(Plugin):
         ``behind(values) -> values``, its parameters as seen from behind the shading normal. The
         estimator shades a hit from behind with a row of those (``MaterialTable.shading``), so
         that the type itself always sees ``wo.z > 0``.
+    rows : the table rows a material of the type takes: 1, or for a composite type (a blend of
+        other materials, ``blendbsdf``) its own row and its parts' rows after it, which its
+        functions (templates) evaluate through ``dispatch.part_eval_pdf`` and ``part_sample``.
     oriented : ``oriented(values) -> bool``, for a type whose value can depend on the direction
         of the surface's tangent (anisotropic roughness): where it is True for a row, the
         kernels shade that row in Mitsuba's frame, s along dp/du (``tracer.textures.FRAME``);
@@ -120,8 +125,14 @@ class MaterialType(Plugin):
     behind: Callable[[dict[str, object]], dict[str, object]] | None = None
     transmits: bool = False
     oriented: Callable[[dict[str, object]], bool] | None = None
+    rows: int = 1
     dims: int = 3
     kind: str = "material"
+
+    @property
+    def composite(self) -> bool:
+        """Whether the type is made of other materials' rows (``rows``)."""
+        return self.rows > 1
 
     def column(self, name: str) -> int:
         """First column of parameter (or derived column) ``name`` in this type's rows."""

@@ -29,7 +29,7 @@ from ..camera import Camera
 from ..errors import InputError, one_line, shown
 from ..lights import projected_images
 from ..lights.projected_images import HEADER_WIDTH, MAX_TABLE_FLOATS, ProjectedImage
-from ..materials import conductor, plastic
+from ..materials import blendbsdf, conductor, plastic
 from ..record import MAX_SAMPLE_INDEX
 from ..textures import FILTERS, LUMINANCE, WRAPS, Perturbation, Texture, bind, tiltable
 from ..textures.bitmap import read_texels
@@ -81,7 +81,7 @@ RIGID_TOLERANCE = 1e-3
 _REFLECTANCES = ("reflectance", "diffuse_reflectance", "specular_reflectance")
 _READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "pplastic",
                          "twosided", "dielectric", "thindielectric", "roughdielectric", "mask",
-                         "normalmap", "bumpmap"})
+                         "normalmap", "bumpmap", "blendbsdf"})
 # BSDFs that wrap one other: a row of its own for the BSDF inside, carrying what they add.
 _WRAPPERS = ("twosided", "mask", "normalmap", "bumpmap")
 _DIELECTRICS = frozenset({"dielectric", "roughdielectric", "thindielectric"})
@@ -1097,7 +1097,38 @@ class _SceneReader:
             inner_id, plugin, type_name, values, _, opacity, tilt = self.material_parts(nested[0][0], True)
             return ident or inner_id, plugin, type_name, values, True, opacity, tilt
         type_name, values = self.bsdf_triple(p)
-        return ident, p, type_name, values, sides or type_name in _DIELECTRICS, None, None
+        both = sides or type_name in _DIELECTRICS or bool(values.get("parts_twosided", False))
+        return ident, p, type_name, values, both, None, None
+
+    def blend(self, p: _Plugin) -> dict[str, object]:
+        """A ``blendbsdf``'s weight (a number or a texture, required, as in Mitsuba) and its two
+        parts, ``(type name, values)`` each, and whether they are two-sided: the values of
+        ``add_material``, which lays out the rows (``tracer.materials.blendbsdf``)."""
+        if not any(obj.tag == "texture" and written.attrs.get("name") == "weight" for obj, written in p.objects) \
+                and not p.has("weight"):
+            p.fail("missing property 'weight' (a number or a texture, as Mitsuba requires)")
+        weight = self.textured(p, "weight", lambda: p.float("weight", 0.5, lo=0.0, hi=1.0), "other")
+        nested = p.nested("bsdf")
+        if len(nested) != 2:
+            p.fail(f"blendbsdf needs two nested BSDFs, not {len(nested)}")
+        parts, sides = [], []
+        for inner, naming in nested:
+            _, _, type_name, values, twosided, opacity, tilt = self.material_parts(inner)
+            kind = materials.TYPES[type_name]
+            if opacity is not None or tilt is not None:
+                naming.fail("a mask, normalmap or bumpmap inside a blendbsdf is not supported (put it around "
+                            "the blendbsdf)", p.element)
+            if kind.composite:
+                naming.fail("a blendbsdf inside a blendbsdf is not supported", p.element)
+            if not tiltable(kind):
+                naming.fail(f"a blendbsdf of {type_name} is not supported (tracer blends materials that only "
+                            "reflect)", p.element)
+            parts.append((type_name, values))
+            sides.append(twosided)
+        if sides[0] != sides[1]:
+            nested[1][1].fail("a blendbsdf of a one-sided and a two-sided BSDF is not supported (wrap the "
+                              "blendbsdf in the twosided)", p.element)
+        return {"weight": weight, "parts": parts, "parts_twosided": sides[0]}
 
     def mask_opacity(self, p: _Plugin) -> object:
         """A ``mask``'s opacity: a texture, or a number in [0, 1] (a colour's luminance, as
@@ -1240,9 +1271,16 @@ class _SceneReader:
         return candidate
 
     def add_material(self, name: str, type_name: str, values: dict[str, object], twosided: bool) -> int:
-        self.triples.append((name, type_name, values))
-        self.sides.append(twosided)
-        return len(self.triples)  # row 0 is the black material
+        """The row of a new material; a blend's two parts (``values["parts"]``) take the rows
+        after it (``tracer.materials.blendbsdf.parts``)."""
+        if "parts" in values:
+            triples = blendbsdf.parts(name, values["weight"], *values["parts"])
+        else:
+            triples = [(name, type_name, values)]
+        row = len(self.triples) + 1  # row 0 is the black material
+        self.triples.extend(triples)
+        self.sides.extend([twosided] * len(triples))
+        return row
 
     def bsdf_triple(self, p: _Plugin) -> tuple[str, dict[str, object]]:
         """tracer's material type and parameters for the Mitsuba BSDF ``p`` (not twosided)."""
@@ -1278,6 +1316,8 @@ class _SceneReader:
                 values.update(int_ior=self.ior(p, "int_ior", "polypropylene"),
                               ext_ior=self.ior(p, "ext_ior", "air"))
             values.update(self.roughness(p))
+        elif kind == "blendbsdf":
+            values = self.blend(p)
         elif kind in _DIELECTRICS:
             values = {
                 "specular_reflectance": p.color("specular_reflectance", 1.0, "reflectance", hi=1.0),
@@ -1289,7 +1329,7 @@ class _SceneReader:
         else:
             p.fail(f"bsdf '{shown(kind)}' is not supported; tracer reads diffuse, conductor, roughconductor, "
                    "plastic, roughplastic, pplastic, dielectric, roughdielectric, thindielectric, twosided, "
-                   "mask, normalmap and bumpmap")
+                   "mask, normalmap, bumpmap and blendbsdf")
         p.done()
         return kind, values
 

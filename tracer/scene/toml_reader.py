@@ -386,6 +386,9 @@ def _read_materials(path: str, table: Any, base: Path, textures: TextureTable) -
     for row, name in enumerate(table, start=1):  # row 0 is the black material
         m = _Reader(path, f"materials.{name}", top.raw(name), keys.MATERIAL)
         kind = materials.TYPES[m.string("type", tuple(materials.TYPES))]
+        if kind.composite:  # its parts are rows of their own, which this format cannot name yet
+            m.fail(f"a {kind.name} is read from Mitsuba XML only (tracer's TOML has no nested materials "
+                   "yet)", "type")
         m.expect(keys.MATERIAL, tuple(p.name for p in kind.params))
         values: dict[str, object] = {}
         for p in kind.params:

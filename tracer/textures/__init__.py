@@ -195,6 +195,8 @@ class Textures(NamedTuple):
     corner_uv : (F, 6) float64 (u, v) at each triangle's three corners, or (0, 6).
     sphere_frame : (S, 9) float64 rows of each analytic sphere's world-to-local rotation, for
         Mitsuba's spherical (u, v), or (0, 9).
+    span : (K,) int64 per material row, the rows its material takes (``MaterialType.rows``: a
+        blend's parts follow it), whose textures a hit on it reads together.
     """
 
     info: np.ndarray
@@ -205,6 +207,7 @@ class Textures(NamedTuple):
     corner_uv: np.ndarray
     sphere_frame: np.ndarray
     perturb: np.ndarray
+    span: np.ndarray
 
 
 @dataclass
@@ -260,10 +263,11 @@ class TextureTable:
                                    bool(p.flip_invalid), bool(p.shadowing))
 
     def arrays(self, material_count: int, corner_uv: np.ndarray, sphere_frame: np.ndarray,
-               copies: dict[int, int] | None = None) -> Textures:
+               copies: dict[int, int] | None = None, span: np.ndarray | None = None) -> Textures:
         """The kernels' arrays (``Textures``) for a table of ``material_count`` materials.
         ``copies``: row -> the row whose bindings it takes too (a two-sided type's inside row,
-        ``MaterialTable.shading``, reads the textures of its outside)."""
+        ``MaterialTable.shading``, reads the textures of its outside). ``span``: the rows each
+        row's material takes (default 1 each)."""
         info = np.zeros((len(self.textures), INFO_WIDTH))
         pools, offset = [], 0
         for row, t in zip(info, self.textures, strict=True):
@@ -298,9 +302,10 @@ class TextureTable:
             perturb[row, PERTURB_KIND] = FRAME
         for row, values in self.perturbations.items():
             perturb[row] = values
+        span = np.ones(material_count, dtype=np.int64) if span is None else np.asarray(span, dtype=np.int64)
         return Textures(info, pixels, bindings, first, opacity,
                         np.ascontiguousarray(corner_uv, dtype=np.float64),
-                        np.ascontiguousarray(sphere_frame, dtype=np.float64), perturb)
+                        np.ascontiguousarray(sphere_frame, dtype=np.float64), perturb, span)
 
     def digest(self) -> bytes:
         """SHA-256 of everything a render reads of the table (scene digests include it)."""

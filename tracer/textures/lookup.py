@@ -183,23 +183,27 @@ def value_at(textures, t: int, one: bool, hit_table, p: int, x, u: float, v: flo
 @jit
 def textured_row(textures, params, material: int, hit_table, first_sphere: int, p: int, x, scratch):
     """``(table, row)`` a hit of primitive ``p`` at ``x`` shades with: ``(params, material)``
-    for a material without textures; otherwise ``(scratch, 0)``, the material's row copied into
-    ``scratch`` (1, W) with each textured parameter's columns set to its texture's value here,
-    clamped into the parameter's range (what the material's kernels are written for)."""
-    first, last = textures.first_binding[material], textures.first_binding[material + 1]
+    for a material without textures; otherwise ``(scratch, 0)``, the material's rows (its own
+    and, for a blend, its parts': ``Textures.span``) copied into ``scratch`` (>= span, W) with
+    each textured parameter's columns set to its texture's value here, clamped into the
+    parameter's range (what the material's kernels are written for)."""
+    span = textures.span[material]
+    first, last = textures.first_binding[material], textures.first_binding[material + span]
     if first == last:
         return params, material
-    for column in range(params.shape[1]):
-        scratch[0, column] = params[material, column]
+    for r in range(span):
+        for column in range(params.shape[1]):
+            scratch[r, column] = params[material + r, column]
     u, v = uv_at(textures, hit_table, first_sphere, p, x)
     bindings = textures.bindings
-    for k in range(first, last):
-        column, size, t = int(bindings[k, 0]), int(bindings[k, 1]), int(bindings[k, 2])
-        lo, hi = bindings[k, 3], bindings[k, 4]
-        r, g, b = value_at(textures, t, size == 1, hit_table, p, x, u, v)
-        scratch[0, column] = min(max(r, lo), hi)
-        if size != 1:
-            scratch[0, column + 1] = min(max(g, lo), hi)
-            scratch[0, column + 2] = min(max(b, lo), hi)
+    for r in range(span):
+        for k in range(textures.first_binding[material + r], textures.first_binding[material + r + 1]):
+            column, size, t = int(bindings[k, 0]), int(bindings[k, 1]), int(bindings[k, 2])
+            lo, hi = bindings[k, 3], bindings[k, 4]
+            red, green, blue = value_at(textures, t, size == 1, hit_table, p, x, u, v)
+            scratch[r, column] = min(max(red, lo), hi)
+            if size != 1:
+                scratch[r, column + 1] = min(max(green, lo), hi)
+                scratch[r, column + 2] = min(max(blue, lo), hi)
     return scratch, 0
 
