@@ -103,10 +103,10 @@ READS = {
     "shape": {"obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk", "cylinder", "instance",
               "shapegroup"},
     "bsdf": {"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "pplastic", "twosided",
-             "dielectric", "roughdielectric", "thindielectric", "mask", "normalmap", "bumpmap"},
+             "dielectric", "roughdielectric", "thindielectric", "mask", "normalmap", "bumpmap", "blendbsdf"},
     "emitter": {"area", "point", "spot", "projector", "directional", "envmap", "constant"},
     "sensor": {"perspective", "thinlens", "orthographic"},
-    "texture": {"bitmap", "checkerboard", "mesh_attribute"},
+    "texture": {"bitmap", "checkerboard", "mesh_attribute", "rawconstant"},
 }
 
 def needs(scene: Path) -> set[str]:

@@ -59,7 +59,23 @@ def _ends(p: materials.Param) -> list[float]:
 
 
 CASES = [(t.name, p.name, end, mixed) for t in TYPES.values() for p in t.params
-         if not (p.choices or p.boolean) for end in _ends(p) for mixed in ((False, True) if p.size == 3 else (False,))]
+         if not (p.choices or p.boolean or p.internal) for end in _ends(p)
+         for mixed in ((False, True) if p.size == 3 else (False,))]
+# A composite type (a blend) is tried over parts of every delta, glossy and diffuse kind.
+PARTS = [("conductor", {}), ("roughconductor", {"reflectance": np.full(3, 0.5), "alpha": 0.5}),
+         ("plastic", {}), ("diffuse", {"reflectance": np.full(3, 0.5)})]
+
+
+def _lanes(type_name: str, values: dict) -> Materials:
+    """N_LANES lanes of the material, a composite one over the pairs of PARTS, lane by lane."""
+    if not TYPES[type_name].composite:
+        return Materials.uniform(type_name, N_LANES, **values)
+    from tracer.materials import blendbsdf
+
+    pairs = [(a, b) for a in PARTS for b in PARTS]
+    triples = [t for i, (a, b) in enumerate(pairs) for t in blendbsdf.parts(f"b{i}", values["weight"], a, b)]
+    rows = 1 + 3 * (np.arange(N_LANES) % len(pairs))
+    return Materials(materials.table(triples), rows.astype(np.int64))
 
 
 @pytest.mark.parametrize("type_name, param, value, mixed", CASES,
@@ -79,7 +95,7 @@ def test_every_accepted_value_renders_finite(type_name, param, value, mixed):
         values[param] = chosen
         if distribution is not None:
             values["distribution"] = distribution
-        lanes = Materials.uniform(type_name, N_LANES, **values)
+        lanes = _lanes(type_name, values)
         sample = lanes.sample(u, wo)
         for label, array in (("f", lanes.eval(wo, wi)), ("pdf", lanes.pdf(wo, wi)), ("sampled wi", sample.wi),
                              ("weight", sample.weight), ("sampled pdf", sample.pdf)):

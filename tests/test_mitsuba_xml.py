@@ -1282,7 +1282,7 @@ def test_render_reference_compare_and_check_take_xml_scenes(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f'tracer: error: {bad}:4: <bsdf type="hair" id="glass">: bsdf \'hair\' is not supported; '
                    "tracer reads diffuse, conductor, roughconductor, plastic, roughplastic, pplastic, dielectric, "
-                   "roughdielectric, thindielectric, twosided, mask, normalmap and bumpmap"]
+                   "roughdielectric, thindielectric, twosided, mask, normalmap, bumpmap and blendbsdf"]
 
 
 def test_substitution_is_bounded_while_it_is_done(tmp_path):

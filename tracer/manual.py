@@ -162,7 +162,7 @@ def plugins_page() -> str:
                 rows = [(code(p.name), ("number" if p.size == 1 and not (p.choices or p.boolean)
                          else ("name" if p.choices else "boolean" if p.boolean else f"{p.size} numbers"))
                          + (" or a texture" if p.texture else ""),
-                         _param_range(p), _param_default(p), p.doc) for p in m.params]
+                         _param_range(p), _param_default(p), p.doc) for p in m.params if not p.internal]
                 rows.append((code("twosided"), "boolean", "true or false", "true",
                              "reflects on both sides (false: black from behind)"))
                 out.append(table(("key", "type", "range", "default", "meaning"), rows))

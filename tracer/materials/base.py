@@ -49,7 +49,8 @@ class Param:
         1.0 or 0.0.   late : added to the type after scene digests were first written; a scene
         that leaves it at its default keeps the digest it had (``MaterialTable.digest_params``).
         texture : a scene may give a texture for it (``tracer.textures``): its kernels read it
-        per hit, and no derived column depends on it except through its mean.
+        per hit, and no derived column depends on it except through its mean.   internal : set
+        by the readers, never given by a scene (a blend's part codes): not in the reference.
     """
 
     name: str
@@ -63,6 +64,7 @@ class Param:
     boolean: bool = False
     late: bool = False
     texture: bool = False
+    internal: bool = False
 
     def check(self, value: object) -> None:
         """Raise ValueError unless ``value`` (a number, or ``size`` numbers) is finite and within

@@ -34,8 +34,10 @@ TYPE = register(MaterialType(module=__name__, rank=CODE, name="blendbsdf", code=
                              doc="a blend of two materials: (1 - weight) f_first + weight f_second",
                              params=(Param("weight", 1, lo=0.0, hi=1.0, default=0.5, texture=True,
                                            doc="0: the first material, 1: the second"),
-                                     Param("first", 1, lo=1.0, doc="the first material's type code"),
-                                     Param("second", 1, lo=1.0, doc="the second material's type code"))))
+                                     Param("first", 1, lo=1.0, internal=True,
+                                           doc="the first material's type code"),
+                                     Param("second", 1, lo=1.0, internal=True,
+                                           doc="the second material's type code"))))
 WEIGHT, FIRST, SECOND = TYPE.column("weight"), TYPE.column("first"), TYPE.column("second")
 
 
