@@ -124,6 +124,25 @@ def test_refusals_name_the_line(sphere_with, bsdf, words):
     assert words in message and "a.xml:" in message and "\n" not in message, message
 
 
+@pytest.mark.parametrize("bsdfs", [
+    f'<bsdf type="blendbsdf" id="B">{W}{D}<ref id="B"/></bsdf>',
+    f'<bsdf type="blendbsdf" id="A">{W}{D}<ref id="B"/></bsdf>'
+    f'<bsdf type="blendbsdf" id="B">{W}{D}<ref id="A"/></bsdf>',
+    f'<bsdf type="twosided" id="T"><bsdf type="blendbsdf">{W}{D}<ref id="T"/></bsdf></bsdf>',
+])
+def test_a_blend_nested_in_itself_is_refused(tmp_path, bsdfs):
+    """A reference cycle through a blend (itself, another blend, a twosided around it), used by
+    no shape, is refused in one line, as Mitsuba refuses a reference cycle (it used to recurse
+    until Python's stack ran out)."""
+    path = tmp_path / "cycle.xml"
+    path.write_text(f'<scene version="3.0.0">{bsdfs}<shape type="sphere"/>'
+                    '<emitter type="point"><point name="position" value="0, 0, 5"/></emitter></scene>')
+    with pytest.raises(InputError) as caught:
+        tracer.load_scene(path)
+    message = str(caught.value)
+    assert "circular reference" in message and "cycle.xml:" in message and "\n" not in message, message
+
+
 def test_toml_refuses_a_blend_by_name():
     with pytest.raises(InputError, match="blendbsdf is read from Mitsuba XML only") as caught:
         tracer.load_scene({

@@ -90,7 +90,9 @@ class DirectLighting:
                                  scene.textures.arrays(len(kind), scene.corner_uv, scene.sphere_frame,
                                                        {int(behind[m]): m for m in range(own)
                                                         if behind[m] >= own},
-                                                       [getattr(types.get(int(k)), "rows", 1) for k in kind]),
+                                                       [getattr(types.get(int(k)), "rows", 1) for k in kind],
+                                                       scene.textures.emission_by_primitive(
+                                                           scene.shape_of_triangle, scene.shape_of_sphere)),
                                  transmits)
         # Rows past the table's (a two-sided type's inside) are never a primitive's own row.
         opacity = np.ones(len(kind))

@@ -18,12 +18,15 @@ from __future__ import annotations
 import math
 
 from .. import lights
-from ..frame import dot, sub, to_world
+from ..frame import add_scaled, dot, sub, to_world
 from ..geometry import surface_point
 from ..jit import jit
 from ..kernels import UNBOUND, template
 from ..lights import environment as environment_light
 from ..samplers import dimensions
+from ..textures import lookup
+
+TEXTURES = False  # bound per build (``tracer.kernels``)
 
 
 @template
@@ -52,17 +55,20 @@ def _plane_distance(hit_table, p, o, cos_normal) -> float:
 
 
 @template
-def direction_value(hit_table, first_sphere: int, light_tables, heuristic: int, rays, row: int, p: int):
+def direction_value(hit_table, first_sphere: int, textures, light_tables, heuristic: int, rays, row: int,
+                    p: int):
     """What direction sample ``row``, whose ray hits primitive ``p``, adds: ``(hit, dist,
     value, raw, pdf_light)``, value = raw x its MIS weight against the light technique (whose
     count is the row's ``other``), raw = its weight x the emitter's radiance (RGB), dist the
     emitter's distance from the shading point, pdf_light the light technique's pdf of the
     direction (0 for a delta sample or without light samples), hit False if it adds nothing
-    (the emitter's back side). ``rays`` is a tuple of the direction buffer's arrays, unpacked
+    (the emitter's back side). ``textures`` give a textured emitter's radiance at the point
+    hit (``lookup.emitted``). ``rays`` is a tuple of the direction buffer's arrays, unpacked
     by the caller before its loop."""
     dirs, values, points, normals, shadings, origins, pdfs, deltas, others = rays
     wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
     x = (points[row, 0], points[row, 1], points[row, 2])
+    y = x  # the emitter's point (a sphere's is found here; a triangle's only if textured)
     if p < first_sphere:
         cos_normal = hit_table[p, 9] * wi[0] + hit_table[p, 10] * wi[1] + hit_table[p, 11] * wi[2]
         dist = _plane_distance(hit_table, p, x, cos_normal) if cos_normal < 0.0 else 0.0
@@ -81,7 +87,13 @@ def direction_value(hit_table, first_sphere: int, light_tables, heuristic: int, 
         receiver = (shadings[row, 0], shadings[row, 1], shadings[row, 2])
         pdf_light = lights.pdf(light_tables, x, n, receiver, p, wi, dist)
         w = dispatch.weight(heuristic, pdfs[row], other * pdf_light)
-    value, raw = _carried(values, row, (hit_table[p, 12], hit_table[p, 13], hit_table[p, 14]), w)
+    if TEXTURES:
+        if p < first_sphere:
+            y = add_scaled(x, dist, wi)
+        le = lookup.emitted(textures, hit_table, first_sphere, p, y)
+    else:
+        le = (hit_table[p, 12], hit_table[p, 13], hit_table[p, 14])
+    value, raw = _carried(values, row, le, w)
     return True, dist, value, raw, pdf_light
 
 

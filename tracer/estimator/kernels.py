@@ -78,6 +78,7 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
     # reference-count update (``lights.sample_with``).
     selection, technique, light_rows = light_tables.selection, light_tables.technique, light_tables.rows
     environment = light_tables.environment
+    emitting = (textures, hit_table, first_sphere, light_tables.prims)
     for lane in range(len(prim)):
         radiance[lane, 0] = radiance[lane, 1] = radiance[lane, 2] = 0.0
         if RESAMPLES:
@@ -100,8 +101,12 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
 
         # The emitter seen directly (weight 1 in every strategy): front side only.
         if cos_view > 0.0:
-            for channel in range(3):
-                radiance[lane, channel] = hit_table[p, 12 + channel]
+            if TEXTURES:
+                le = lookup.emitted(textures, hit_table, first_sphere, p, x)
+                radiance[lane, 0], radiance[lane, 1], radiance[lane, 2] = le[0], le[1], le[2]
+            else:
+                for channel in range(3):
+                    radiance[lane, channel] = hit_table[p, 12 + channel]
         if not reflects:
             continue
         point = (x, geometric, normal, s, t, wo)
@@ -143,7 +148,7 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
             for j in range(lights_here):
                 wi_world, dist, value, raw, w_balance, share_t = light_samples.light_sample(
                     j, sampler, state, selection, technique, light_rows, environment, here, plan, point,
-                    surface, (own_light, own_dir))
+                    surface, (own_light, own_dir), emitting)
                 if TEXTURES and tilted:
                     bend = shading_frames.factor(unperturbed, normal, a2, wi_world)
                     value, raw = scale(bend, value), scale(bend, raw)
@@ -219,7 +224,7 @@ def gather(radiance, surfaces, light_tables, plan, tuned, shadow, blocked, direc
             if learning:
                 tuning.learn(lane_stats, lane, shares, collect, shadow_control[row], shadow_v2[row],
                              shadow_t[row], shadow_other[row] / plan.total)
-    hit_table, first_sphere = surfaces.hit_table, surfaces.first_sphere
+    hit_table, first_sphere, textures = surfaces.hit_table, surfaces.first_sphere, surfaces.textures
     rays = direction_arrays(direction)
     lanes, others, pdfs, deltas = direction.lane, direction.other, direction.pdf, direction.delta
     for row in range(len(prim)):
@@ -228,7 +233,7 @@ def gather(radiance, surfaces, light_tables, plan, tuned, shadow, blocked, direc
                 continue
             value, raw, pdf_light = environment_value(light_tables, plan.heuristic, rays, row)
         else:
-            hit, _, value, raw, pdf_light = direction_value(hit_table, first_sphere, light_tables,
+            hit, _, value, raw, pdf_light = direction_value(hit_table, first_sphere, textures, light_tables,
                                                             plan.heuristic, rays, row, prim[row])
             if not hit:
                 continue

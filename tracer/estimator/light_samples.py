@@ -18,19 +18,22 @@ from .. import lights, mis
 from ..frame import to_local
 from ..kernels import UNBOUND, template
 from ..samplers import dimensions
+from ..textures import lookup
 
-LEARNS = DIRECTION_SAMPLES = TRANSMITS = False  # bound per build (``tracer.kernels``)
+LEARNS = DIRECTION_SAMPLES = TRANSMITS = TEXTURES = False  # bound per build (``tracer.kernels``)
 
 
 @template
 def light_sample(j: int, sampler, state, selection, technique, rows, environment, params, plan, point,
-                 surface, own):
+                 surface, own, emitting):
     """Light sample ``j`` of the shading point ``point = (x, geometric, normal, s, t, wo)`` of
     material ``surface = (kind, row, receiver, through)`` (receiver: the normal bounding which
     lights reach it, 0 for a type that transmits, ``through``), taken with expected counts
     ``own = (n̄_l, n̄_d)``, from
     the light tables' ``selection``, ``technique``, ``rows`` and ``environment``, read before
-    the kernel's loop and passed apart (``lights.sample_with``; 12 parameters for that reason):
+    the kernel's loop and passed apart (``lights.sample_with``; 13 parameters for that reason),
+    and ``emitting = (textures, hit_table, first_sphere, prims)``, what a textured emitter's
+    value at the sampled point is looked up in (``lookup.sampled_emission``):
     ``(wi_world, dist, value, raw, w_balance, share_t)``.
 
     value : RGB it adds if unblocked (weighted).   raw : the same before the MIS weight (what
@@ -42,12 +45,15 @@ def light_sample(j: int, sampler, state, selection, technique, rows, environment
     own_light, own_dir = own
     zero = (0.0, 0.0, 0.0)
     u = dispatch.uniform_pair(sampler, state, dimensions.light_point(j))
-    wi_world, dist, le, pdf_light, delta = lights.sample_with(
+    wi_world, dist, le, pdf_light, delta, k = lights.sample_with(
         selection, technique, rows, environment, x, geometric, receiver,
         dispatch.uniform(sampler, state, dimensions.light_choice(j)),
         u[0], u[1])
     if not pdf_light > 0.0:
         return wi_world, 0.0, zero, zero, 1.0, 1.0
+    if TEXTURES:
+        textures, hit_table, first_sphere, prims = emitting
+        le = lookup.sampled_emission(textures, hit_table, first_sphere, prims, k, x, wi_world, dist, le)
     wi = to_local(s, t, normal, wi_world)
     f, pdf_bsdf = dispatch.material_eval_pdf(kind, params, material, wo, wi)
     # A type that transmits takes light from below too: |cos theta_i| (``MaterialType.transmits``).

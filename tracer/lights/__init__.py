@@ -85,6 +85,9 @@ class LightTables(NamedTuple):
         (``bounds.may_reach``).
     environment : the environment's table (``environment.EnvironmentTable``; its
         ``candidate`` -1 without one).
+    prims : (K, 2) int32, the scene primitives each candidate covers (a rectangle: its two
+        triangles; a triangle or a sphere: one, then -1; the others: -1, -1), for the value of
+        a textured emitter at a sampled point (``tracer.textures.lookup.sampled_emission``).
     """
 
     selection: Any
@@ -93,6 +96,7 @@ class LightTables(NamedTuple):
     candidate_of_prim: np.ndarray
     spheres: np.ndarray
     environment: Any
+    prims: np.ndarray
 
 
 @template
@@ -107,25 +111,27 @@ def sample(lights, x, n, n_receiver, u_select: float, u0: float, u1: float):
         selection probability alone. 0 where invalid.
     delta : a delta light (no other technique can produce this sample).
     """
-    return sample_with(lights.selection, lights.technique, lights.rows, lights.environment, x, n, n_receiver,
-                       u_select, u0, u1)
+    wi, dist, le, p, delta, _ = sample_with(lights.selection, lights.technique, lights.rows,
+                                            lights.environment, x, n, n_receiver, u_select, u0, u1)
+    return wi, dist, le, p, delta
 
 
 @template
 def sample_with(selection, technique, rows, environment, x, n, n_receiver, u_select: float, u0: float,
                 u1: float):
-    """:func:`sample` with the tables' parts read beforehand: a per-lane loop reads them once,
+    """:func:`sample` with the tables' parts read beforehand, and the candidate sampled last
+    (-1 if none): ``(wi, dist, le, pdf, delta, k)``. A per-lane loop reads the parts once,
     before it starts. Each read of an array through a tuple costs a reference-count update
     (numba), and reading ``lights.selection``, ``.technique`` and ``.rows`` per light sample cost
     ``shade`` 30% on ``veach_mis`` (1.13 s against 0.80 s for 512 x 512 x 16 lanes, one thread)."""
     k, pmf_k = dispatch.choose(selection, x, n_receiver, u_select)
     if k < 0:
-        return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, False
+        return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), 0.0, False, k
     if ENVIRONMENT and k == environment.candidate:
         wi, le, p = environment_light.sample(environment, u0, u1)
-        return wi, math.inf, le, pmf_k * p, False
+        return wi, math.inf, le, pmf_k * p, False, k
     wi, dist, le, p, delta = dispatch.technique_sample(technique[k], rows, k, x, n, u0, u1)
-    return wi, dist, le, pmf_k * p, delta
+    return wi, dist, le, pmf_k * p, delta, k
 
 
 @template
@@ -193,6 +199,7 @@ def build_tables(scene, light_selection: str = "power",
     rows = np.zeros((count, ROW_WIDTH), dtype=np.float32)
     technique = np.zeros(count, dtype=np.int8)
     candidate_of_prim = np.full(len(scene.faces) + len(scene.spheres), -1, dtype=np.int32)
+    prims = np.full((count, 2), -1, dtype=np.int32)
     first = 0
     appended: list[np.ndarray] = []
     environment_candidate = -1
@@ -217,8 +224,9 @@ def build_tables(scene, light_selection: str = "power",
             rows[first:first + len(record), column] = link
             appended.append(extra)
         technique[first:first + len(record)] = plugin.code
-        for prims in record.prims:
-            candidate_of_prim[prims] = np.arange(first, first + len(record), dtype=np.int32)
+        for column, covered in enumerate(record.prims):
+            candidate_of_prim[covered] = np.arange(first, first + len(record), dtype=np.int32)
+            prims[first:first + len(record), column] = covered
         first += len(record)
     candidates = emitters.Candidates.of(ordered)
     tables = selection.functions().tables(candidates)
@@ -229,7 +237,7 @@ def build_tables(scene, light_selection: str = "power",
     environment = environment_light.table(scene.environment, environment_candidate)
     rows = np.concatenate([rows, *appended]) if appended else rows
     return LightTables(tables, technique, np.ascontiguousarray(rows), candidate_of_prim, spheres,
-                       environment), candidates.owner
+                       environment, prims), candidates.owner
 
 
 def technique_names(tables: LightTables) -> tuple[str, ...]:

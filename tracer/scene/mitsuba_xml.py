@@ -294,6 +294,7 @@ class _SceneReader:
         self.spots: list[tuple[np.ndarray, float, float]] = []  # per point light: axis, cutoff, beam (deg)
         self.point_images: list[ProjectedImage | None] = []  # per point light: what it projects
         self.projected_floats = 0  # the light table's floats those images take (``projected_texture``)
+        self.bsdfs_reading: set[int] = set()  # the BSDF elements being read (``material_parts``)
         self.directionals: list[tuple[np.ndarray, np.ndarray]] = []  # direction, irradiance
 
     def plugin(self, element: Element) -> _Plugin:
@@ -775,11 +776,23 @@ class _SceneReader:
             material = self.default_material()
         return material, emission
 
-    def area_radiance(self, element: Element) -> np.ndarray:
+    def area_radiance(self, element: Element) -> "np.ndarray | Texture":
+        """An ``area`` emitter's radiance: an RGB colour, or a texture (a bitmap, a checkerboard,
+        a rawconstant) whose value at a point of the shape is the radiance leaving it there."""
         p = self.plugin(element)
-        radiance = p.color("radiance", 1.0, "emitter", hi=MAX_RADIANCE)
+        radiance = self.colour(p, "radiance", 1.0, "emitter", hi=MAX_RADIANCE)
         p.float("sampling_weight", 1.0, lo=0.0)  # how often Mitsuba samples it: not the image
         p.done()
+        if isinstance(radiance, Texture):
+            if radiance.kind == "mesh_attribute":
+                element.fail("a mesh_attribute radiance is not supported (give a bitmap, a checkerboard or a "
+                             "colour)")
+            low, high = radiance.value_range()
+            if low < 0.0:
+                element.fail(f"the radiance texture has negative values ({low:.4g}; light is >= 0)")
+            if not high <= MAX_RADIANCE:
+                element.fail(f"the radiance texture's values reach {high:.4g}, beyond {MAX_RADIANCE:g}")
+            return radiance
         # float32, as the TOML reader keeps emission (and the light table stores it)
         return radiance.astype(np.float32).astype(np.float64)
 
@@ -880,7 +893,7 @@ class _SceneReader:
         if not MIN_PROJECTION_DEGREES <= fov_x <= MAX_PROJECTOR_DEGREES:
             (p.props.get("fov") or p.props.get("focal_length") or p.element).fail(
                 f"a projector's horizontal field of view must lie in [{MIN_PROJECTION_DEGREES:g}, "
-                f"{MAX_PROJECTOR_DEGREES:g}] degrees; this is {fov_x:g}", p.element)
+                f"{MAX_PROJECTOR_DEGREES:g}] degrees; this is {fov_x:.10g}", p.element)
         matrix = p.transform()
         linear = np.eye(3) if matrix is None else matrix[:3, :3]
         problem = _similarity_problem(linear)
@@ -1045,6 +1058,19 @@ class _SceneReader:
         (Mitsuba nests it there: its pass-through is not a transmission lobe) and a mask a
         ``twosided``. Mitsuba's dielectrics shade both sides (an inside seen from behind: eta
         inverted)."""
+        # A BSDF nested (through references) in itself would recurse without end: refused, as
+        # Mitsuba refuses a reference cycle. Reading is depth first, so the ones being read are
+        # the chain from the shape to here.
+        if id(bsdf) in self.bsdfs_reading:
+            bsdf.fail("a circular reference: this BSDF would be nested in itself")
+        self.bsdfs_reading.add(id(bsdf))
+        try:
+            return self._material_parts(bsdf, sides)
+        finally:
+            self.bsdfs_reading.discard(id(bsdf))
+
+    def _material_parts(self, bsdf: Element, sides: bool) -> tuple:
+        """:meth:`material_parts`, once it is known not to be read already."""
         p = self.plugin(bsdf)
         ident = bsdf.attrs.get("id")
         if p.type == "mask":
@@ -1495,7 +1521,9 @@ def _similarity_problem(linear: np.ndarray) -> str | None:
     scale = float(np.trace(gram)) / 3.0
     if not np.all(np.isfinite(gram)) or not math.isfinite(scale):
         return "its scale is beyond the number range"
-    if not scale > 0.0 or np.max(np.abs(gram / scale - np.eye(3))) > 1e-4:
+    if not scale > 1e-200:  # squared: lengths below 1e-100, where the test below loses its digits
+        return "its scale is zero or too small for the number range"
+    if np.max(np.abs(gram / scale - np.eye(3))) > 1e-4:
         return "it must be a rotation and translation (a scale or shear would distort the cone)"
     return None
 

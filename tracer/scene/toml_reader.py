@@ -456,14 +456,24 @@ class _Geometry:
         self.textures = TextureTable()
         self.attributes: list[dict[str, np.ndarray]] = []  # per shape: its mesh file's (mesh.Mesh)
 
+    def _emission(self, emission: "np.ndarray | Texture") -> np.ndarray:
+        """The constant emission (3,) of the shape added next: ``emission`` itself, or a
+        radiance texture's mean, the texture bound to the shape (``TextureTable.bind_emission``),
+        rounded to float32 as every table holds emission."""
+        if isinstance(emission, Texture):
+            emission = self.textures.bind_emission(len(self.shapes), emission)
+        return np.asarray(emission, dtype=np.float32).astype(np.float64)
+
     def add(self, shape_type: str, record: dict[str, Any], vertices: np.ndarray, faces: np.ndarray,
-            material: int, emission: np.ndarray, normals: np.ndarray | None = None,
+            material: int, emission: "np.ndarray | Texture", normals: np.ndarray | None = None,
             corner_uv: np.ndarray | None = None, attributes: dict[str, np.ndarray] | None = None) -> None:
         """Add a shape's triangles; ``normals`` (V, 3) unit vertex normals for smooth shading
         (a zero normal shades its triangles flat), None for flat shading; ``corner_uv`` (F, 6)
         texture coordinates at each triangle's corners, None for none (a texture then sees the
         barycentrics, as in Mitsuba); ``attributes`` its mesh attributes by name, each (F, 3, C)
-        at the corners (``mesh.Mesh.attributes``, corners in the order of ``faces``)."""
+        at the corners (``mesh.Mesh.attributes``, corners in the order of ``faces``). ``emission``
+        (3,) or a radiance texture (:meth:`_emission`)."""
+        emission = self._emission(emission)
         n = len(faces)
         self.attributes.append(dict(attributes or {}))
         self.corner_uv.append(np.tile(NO_UV, (n, 1)) if corner_uv is None
@@ -480,10 +490,11 @@ class _Geometry:
         self.shapes.append(Shape(shape_type, self._triangles, n, material, emission, record))
         self._triangles += n
 
-    def add_sphere(self, record: dict[str, Any], material: int, emission: np.ndarray,
+    def add_sphere(self, record: dict[str, Any], material: int, emission: "np.ndarray | Texture",
                    frame: np.ndarray | None = None) -> None:
         """Add an analytic sphere; ``frame`` (3, 3) its world-to-local rotation, for texture
-        coordinates (None: the world's axes)."""
+        coordinates (None: the world's axes); ``emission`` as for :meth:`add`."""
+        emission = self._emission(emission)
         self.sphere_frames.append(np.eye(3).ravel() if frame is None
                                   else np.asarray(frame, dtype=np.float64).ravel())
         self.spheres.append([*record["center"], record["radius"]])

@@ -49,7 +49,8 @@ def write_scene(scene: Scene, path: str | os.PathLike[str], source: str | None =
         # The TOML format has no textures yet: writing their means would render another image.
         names = sorted({b.param for b in scene.textures.bindings}
                        | ({"opacity"} if scene.textures.cutouts else set())
-                       | {_MAPS[kind] for kind, *_ in scene.textures.perturbations.values()})
+                       | {_MAPS[kind] for kind, *_ in scene.textures.perturbations.values()}
+                       | ({"radiance"} if scene.textures.emitters else set()))
         raise InputError(f"the scene has textures ({', '.join(names)}), which tracer's TOML format does not "
                          "hold yet: render the XML scene itself", str(scene.path))
     if scene.environment is not None and scene.environment.kind != "constant":

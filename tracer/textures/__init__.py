@@ -197,6 +197,9 @@ class Textures(NamedTuple):
         Mitsuba's spherical (u, v), or (0, 9).
     span : (K,) int64 per material row, the rows its material takes (``MaterialType.rows``: a
         blend's parts follow it), whose textures a hit on it reads together.
+    emission : (F + S,) int64 per primitive, the texture that gives its emitted radiance
+        (``TextureTable.emitters``), -1 where it is the constant of the hit table; (0,) when no
+        emitter is textured.
     """
 
     info: np.ndarray
@@ -208,6 +211,7 @@ class Textures(NamedTuple):
     sphere_frame: np.ndarray
     perturb: np.ndarray
     span: np.ndarray
+    emission: np.ndarray
 
 
 @dataclass
@@ -216,28 +220,33 @@ class TextureTable:
     opacity of material rows (``cutouts``: row -> texture index) and their shading frames
     (``perturbations``: row -> (kind code, texture index, scale, flip_invalid, shadowing)), and
     the rows shaded in Mitsuba's frame of dp/du without a map (``frames``: anisotropic
-    materials, ``MaterialType.oriented``)."""
+    materials, ``MaterialType.oriented``), and the emitting shapes whose radiance a texture
+    gives (``emitters``: shape index -> texture index; Mitsuba's ``area`` emitter with a
+    ``radiance`` texture). A textured emitter's constant emission, in the scene's arrays, is the
+    texture's mean: what the light selection weighs it by."""
 
     textures: list[Texture] = field(default_factory=list)
     bindings: list[Binding] = field(default_factory=list)
     cutouts: dict[int, int] = field(default_factory=dict)
     perturbations: dict[int, tuple[int, int, float, bool, bool]] = field(default_factory=dict)
     frames: set[int] = field(default_factory=set)
+    emitters: dict[int, int] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
         """Whether anything reads texture coordinates (then the scene keeps them)."""
-        return bool(self.bindings or self.cutouts or self.perturbations or self.frames)
+        return bool(self.bindings or self.cutouts or self.perturbations or self.frames or self.emitters)
 
     @property
     def textured(self) -> bool:
         """Whether any texture is used (``frames`` alone use none: a TOML file holds them)."""
-        return bool(self.bindings or self.cutouts or self.perturbations)
+        return bool(self.bindings or self.cutouts or self.perturbations or self.emitters)
 
     @property
     def shading(self) -> bool:
-        """Whether a lookup happens during shading (a bound parameter or a perturbed frame):
-        what the kernels' ``TEXTURES`` switch is for. Opacity alone is read by the cutouts."""
-        return bool(self.bindings or self.perturbations or self.frames)
+        """Whether a lookup happens during shading (a bound parameter, a perturbed frame or a
+        textured emitter): what the kernels' ``TEXTURES`` switch is for. Opacity alone is read
+        by the cutouts."""
+        return bool(self.bindings or self.perturbations or self.frames or self.emitters)
 
     def add(self, texture: Texture) -> int:
         """The index of ``texture`` in the table, added unless it is there (the same object)."""
@@ -262,12 +271,32 @@ class TextureTable:
         self.perturbations[row] = (PERTURBATIONS[p.kind], self.add(p.texture), float(p.scale),
                                    bool(p.flip_invalid), bool(p.shadowing))
 
+    def bind_emission(self, shape: int, texture: Texture) -> np.ndarray:
+        """Shape ``shape`` emits the radiance ``texture`` gives (>= 0 everywhere); returns its
+        mean RGB (3,), the shape's constant emission."""
+        self.emitters[shape] = self.add(texture)
+        return np.maximum(texture.mean(3), 0.0)
+
+    def emission_by_primitive(self, shape_of_triangle: np.ndarray, shape_of_sphere: np.ndarray) -> np.ndarray:
+        """``Textures.emission``: (F + S,) int64 the texture of each primitive's emission (-1:
+        none), primitives ordered as the hit table (triangles, then spheres); (0,) when no
+        emitter is textured."""
+        if not self.emitters:
+            return np.zeros(0, dtype=np.int64)
+        shapes = np.concatenate([shape_of_triangle, shape_of_sphere]).astype(np.int64)
+        by_shape = np.full(max(int(shapes.max(initial=-1)), max(self.emitters)) + 1, -1, dtype=np.int64)
+        for shape, texture in self.emitters.items():
+            by_shape[shape] = texture
+        return by_shape[shapes]
+
     def arrays(self, material_count: int, corner_uv: np.ndarray, sphere_frame: np.ndarray,
-               copies: dict[int, int] | None = None, span: np.ndarray | None = None) -> Textures:
+               copies: dict[int, int] | None = None, span: np.ndarray | None = None,
+               emission: np.ndarray | None = None) -> Textures:
         """The kernels' arrays (``Textures``) for a table of ``material_count`` materials.
         ``copies``: row -> the row whose bindings it takes too (a two-sided type's inside row,
         ``MaterialTable.shading``, reads the textures of its outside). ``span``: the rows each
-        row's material takes (default 1 each)."""
+        row's material takes (default 1 each). ``emission``: ``Textures.emission``
+        (:meth:`emission_by_primitive`; default none)."""
         info = np.zeros((len(self.textures), INFO_WIDTH))
         pools, offset = [], 0
         for row, t in zip(info, self.textures, strict=True):
@@ -303,9 +332,11 @@ class TextureTable:
         for row, values in self.perturbations.items():
             perturb[row] = values
         span = np.ones(material_count, dtype=np.int64) if span is None else np.asarray(span, dtype=np.int64)
+        emission = np.zeros(0, dtype=np.int64) if emission is None else np.asarray(emission, dtype=np.int64)
         return Textures(info, pixels, bindings, first, opacity,
                         np.ascontiguousarray(corner_uv, dtype=np.float64),
-                        np.ascontiguousarray(sphere_frame, dtype=np.float64), perturb, span)
+                        np.ascontiguousarray(sphere_frame, dtype=np.float64), perturb, span,
+                        np.ascontiguousarray(emission))
 
     def digest(self) -> bytes:
         """SHA-256 of everything a render reads of the table (scene digests include it)."""
@@ -328,6 +359,8 @@ class TextureTable:
             h.update(f"perturb {row} {values!r}\0".encode())
         for row in sorted(self.frames):  # none before anisotropic roughness
             h.update(f"frame {row}\0".encode())
+        for shape, texture in sorted(self.emitters.items()):  # none before textured emitters
+            h.update(f"emits {shape} {texture}\0".encode())
         return h.digest()
 
 

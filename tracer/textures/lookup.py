@@ -207,3 +207,36 @@ def textured_row(textures, params, material: int, hit_table, first_sphere: int, 
                 scratch[r, column + 2] = min(max(blue, lo), hi)
     return scratch, 0
 
+
+
+@jit
+def emitted(textures, hit_table, first_sphere: int, p: int, x):
+    """The radiance primitive ``p`` emits from its front at its point ``x``: its emission
+    texture's RGB at x's (u, v) (``Textures.emission``), else the hit table's constant."""
+    emission = textures.emission
+    if len(emission) > 0 and emission[p] >= 0:
+        u, v = uv_at(textures, hit_table, first_sphere, p, x)
+        red, green, blue = value_at(textures, emission[p], False, hit_table, p, x, u, v)
+        return max(red, 0.0), max(green, 0.0), max(blue, 0.0)
+    return hit_table[p, 12], hit_table[p, 13], hit_table[p, 14]
+
+
+@jit
+def sampled_emission(textures, hit_table, first_sphere: int, prims, k: int, x, wi, dist: float, le):
+    """The radiance that arrives at ``x`` along ``wi`` from the point at ``dist`` on light
+    candidate ``k``, whose light technique gave ``le`` (its row's constant): the emission there
+    if the candidate's primitives (``LightTables.prims``) are textured, else ``le``. A
+    rectangle's point lies on one of its two triangles: the first if its barycentrics there are
+    in the triangle (the second's (u, v) may differ on a quad from a mesh file)."""
+    emission = textures.emission
+    if k < 0 or len(emission) == 0:
+        return le
+    p = prims[k, 0]
+    if p < 0 or emission[p] < 0:
+        return le
+    y = (x[0] + dist * wi[0], x[1] + dist * wi[1], x[2] + dist * wi[2])
+    if prims[k, 1] >= 0:
+        _, b1, b2 = barycentrics(hit_table, p, y)
+        if not (b1 >= 0.0 and b2 >= 0.0 and b1 + b2 <= 1.0):
+            p = prims[k, 1]
+    return emitted(textures, hit_table, first_sphere, p, y)

@@ -104,8 +104,8 @@ def resample(radiance, surfaces, light_tables, plan, direction, prim, shadow, re
             offer(shadow_origin, shadow_dir, shadow_tmax, shadow_value, weight_sum, u_left, radiance,
                   lanes[row], origin, wi, math.inf, value)
             continue
-        hit, dist, value, _, _ = direction_value(hit_table, first_sphere, light_tables, plan.heuristic, rays,
-                                                 row, prim[row])
+        hit, dist, value, _, _ = direction_value(hit_table, first_sphere, surfaces.textures, light_tables,
+                                                 plan.heuristic, rays, row, prim[row])
         if not hit:
             continue
         x = (points[row, 0], points[row, 1], points[row, 2])
