@@ -254,7 +254,9 @@ class LightSample:
     wi : (n, 3) world unit direction from the shading point toward the light.
     dist : (n,) distance to the sampled point.
     radiance : (n, 3) Le arriving along ``wi`` (area), or I / d^2 (point): the estimator's
-        contribution is f |cos theta_i| radiance / pdf. 0 where the sample is invalid.
+        contribution is f |cos theta_i| radiance / pdf. 0 where the sample is invalid. For a
+        textured emitter, the technique's constant (the texture's mean): the estimator looks
+        the texture up at the sampled point (``tracer.textures.lookup.sampled_emission``).
     pdf : (n,) solid-angle pdf including the selection probability; for a point light, its
         selection probability alone. 0 where invalid.
     delta : (n,) bool, a delta light (no other technique can produce this sample).

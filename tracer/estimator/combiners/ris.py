@@ -88,6 +88,7 @@ def resample(radiance, surfaces, light_tables, plan, direction, prim, shadow, re
     lanes' reservoirs; then turn each lane's kept candidate into its shadow ray carrying
     v_J / mean(v_J) * sum w, packed into rows 0 .. count - 1. Returns the count."""
     eps, hit_table, first_sphere = surfaces.eps, surfaces.hit_table, surfaces.first_sphere
+    textures = surfaces.textures  # read once: a read through a tuple in the loop costs a reference count
     shadow_origin, shadow_dir, shadow_tmax = shadow.origin, shadow.dir, shadow.tmax
     shadow_value, shadow_lane = shadow.value, shadow.lane
     weight_sum, u_left = reservoirs.weight, reservoirs.u
@@ -104,7 +105,7 @@ def resample(radiance, surfaces, light_tables, plan, direction, prim, shadow, re
             offer(shadow_origin, shadow_dir, shadow_tmax, shadow_value, weight_sum, u_left, radiance,
                   lanes[row], origin, wi, math.inf, value)
             continue
-        hit, dist, value, _, _ = direction_value(hit_table, first_sphere, surfaces.textures, light_tables,
+        hit, dist, value, _, _ = direction_value(hit_table, first_sphere, textures, light_tables,
                                                  plan.heuristic, rays, row, prim[row])
         if not hit:
             continue
