@@ -872,7 +872,7 @@ def test_ior_names_are_mitsubas():
      '</bsdf>', ["specular_transmittance", "is not expected inside"]),
     ('<bsdf type="dielectric"><float name="int_ior" value="0"/></bsdf>', ["int_ior", ">= 0.01, got 0"]),
     ('<bsdf type="thindielectric"><string name="ext_ior" value="glas"/></bsdf>', ["unknown IOR name 'glas'"]),
-    ('<bsdf type="principled"/>', ["bsdf 'principled' is not supported"]),
+    ('<bsdf type="hair"/>', ["bsdf 'hair' is not supported"]),
     ('<bsdf type="twosided"><bsdf type="diffuse"/><bsdf type="plastic"/></bsdf>', ["two different BSDFs"]),
     ('<bsdf type="twosided"/>', ["one nested bsdf"]),
     ('<bsdf type="twosided"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>', ["twosided inside"]),
@@ -1282,7 +1282,8 @@ def test_render_reference_compare_and_check_take_xml_scenes(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f'tracer: error: {bad}:4: <bsdf type="hair" id="glass">: bsdf \'hair\' is not supported; '
                    "tracer reads diffuse, conductor, roughconductor, plastic, roughplastic, pplastic, dielectric, "
-                   "roughdielectric, thindielectric, twosided, mask, normalmap, bumpmap and blendbsdf"]
+                   "roughdielectric, thindielectric, twosided, mask, normalmap, bumpmap, blendbsdf, principled and "
+                   "principledthin"]
 
 
 def test_substitution_is_bounded_while_it_is_done(tmp_path):

@@ -19,14 +19,17 @@ thindielectric    8     ``thindielectric.py``: a thin pane, delta reflection and
 roughdielectric   9     ``roughdielectric.py``: rough glass, microfacet reflection and refraction
 pplastic          10    ``pplastic.py``: rough specular plus Fresnel-attenuated diffuse (Mitsuba's)
 blendbsdf         11    ``blendbsdf.py``: a blend of two materials (composite: its parts are rows)
+principled        12    ``principled.py``: Burley's principled BSDF (Mitsuba's), an interface
+principledthin    13    ``principledthin.py``: Burley's thin sheet (Mitsuba's), both sides alike
 ================  ====  ==============================================================
 
 ``microfacet.py`` holds what the rough types share (distributions, visible-normal sampling,
-Fresnel terms); ``presets.py`` the named metals of Mitsuba scenes. A material is two-sided
-(TOML) or one-sided, black from behind its shading normal (Mitsuba's rule):
-``MaterialTable.twosided``, applied by the estimator, not by the types; a type whose sides
-differ (a dielectric's inside) declares ``behind``, and the estimator shades a hit from behind
-with a row of those parameters (``MaterialTable.shading``).
+Fresnel terms), ``principled_lobes.py`` what the two principled types share; ``presets.py``
+the named metals of Mitsuba scenes. A material is two-sided (TOML) or one-sided, black from
+behind its shading normal (Mitsuba's rule): ``MaterialTable.twosided``, applied by the
+estimator, not by the types; a type whose sides differ (a dielectric's inside) declares
+``behind``, and the estimator shades a hit from behind with a row of those parameters
+(``MaterialTable.shading``).
 
 Adding a material: one module here with ``CODE``, ``TYPE = register(MaterialType(...))``,
 ``eval_pdf`` and ``sample`` (found by ``plugins.discover``: nothing else to edit). The scene

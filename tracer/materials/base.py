@@ -211,11 +211,12 @@ def rgb(params, row: int, column: int):
 @jit
 def weighted(wi, f, pdf: float, lobe: int):
     """A ``sample`` result ``(wi, weight, pdf, lobe)`` for a direction drawn with density
-    ``pdf`` whose f is ``f``: weight = f cos(theta_i) / pdf; all zero where ``lobe`` is 0 (no
-    direction was drawn) or the pdf is not positive."""
+    ``pdf`` whose f is ``f``: weight = f |cos(theta_i)| / pdf (wi below the surface: a
+    transmission); all zero where ``lobe`` is 0 (no direction was drawn) or the pdf is not
+    positive."""
     if lobe == 0 or not pdf > 0.0:
         return wi, (0.0, 0.0, 0.0), 0.0, 0
-    c = wi[2] / pdf
+    c = abs(wi[2]) / pdf
     return wi, (f[0] * c, f[1] * c, f[2] * c), pdf, lobe
 
 

@@ -29,7 +29,7 @@ from ..camera import Camera
 from ..errors import InputError, one_line, shown
 from ..lights import projected_images
 from ..lights.projected_images import HEADER_WIDTH, MAX_TABLE_FLOATS, ProjectedImage
-from ..materials import blendbsdf, conductor, plastic
+from ..materials import blendbsdf, conductor, plastic, principled, principledthin
 from ..record import MAX_SAMPLE_INDEX
 from ..textures import FILTERS, LUMINANCE, WRAPS, Perturbation, Texture, bind, tiltable
 from ..textures.bitmap import read_texels
@@ -81,7 +81,8 @@ RIGID_TOLERANCE = 1e-3
 _REFLECTANCES = ("reflectance", "diffuse_reflectance", "specular_reflectance")
 _READ_BSDFS = frozenset({"diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "pplastic",
                          "twosided", "dielectric", "thindielectric", "roughdielectric", "mask",
-                         "normalmap", "bumpmap", "blendbsdf"})
+                         "normalmap", "bumpmap", "blendbsdf", "principled",
+                         "principledthin"})
 # BSDFs that wrap one other: a row of its own for the BSDF inside, carrying what they add.
 _WRAPPERS = ("twosided", "mask", "normalmap", "bumpmap")
 _DIELECTRICS = frozenset({"dielectric", "roughdielectric", "thindielectric"})
@@ -1123,7 +1124,20 @@ class _SceneReader:
             inner_id, plugin, type_name, values, _, opacity, tilt = self.material_parts(nested[0][0], True)
             return ident or inner_id, plugin, type_name, values, True, opacity, tilt
         type_name, values = self.bsdf_triple(p)
-        both = sides or type_name in _DIELECTRICS or bool(values.get("parts_twosided", False))
+        if type_name == "principled" and sides:
+            if values["spec_trans"] is not None and not (isinstance(values["spec_trans"], float)
+                                                         and values["spec_trans"] == 0.0):
+                p.fail("a principled with spec_trans inside a twosided (Mitsuba nests only BSDFs without "
+                       "transmission)")
+            values["mirrored"] = True
+        if type_name == "principled" and values["spec_trans"] is None:
+            values["spec_trans"] = 0.0
+        # Mitsuba's dielectrics and principled BSDF shade both sides (an interface: its inside).
+        if type_name == "principledthin" and sides:
+            p.fail("a principledthin inside a twosided (Mitsuba nests only BSDFs without transmission; "
+                   "the thin BSDF is the same from both sides already)")
+        both = sides or type_name in _DIELECTRICS or type_name in ("principled", "principledthin") \
+            or bool(values.get("parts_twosided", False))
         return ident, p, type_name, values, both, None, None
 
     def blend(self, p: _Plugin) -> dict[str, object]:
@@ -1344,6 +1358,8 @@ class _SceneReader:
             values.update(self.roughness(p))
         elif kind == "blendbsdf":
             values = self.blend(p)
+        elif kind in ("principled", "principledthin"):
+            values = self.principled(p)
         elif kind in _DIELECTRICS:
             values = {
                 "specular_reflectance": p.color("specular_reflectance", 1.0, "reflectance", hi=1.0),
@@ -1355,9 +1371,47 @@ class _SceneReader:
         else:
             p.fail(f"bsdf '{shown(kind)}' is not supported; tracer reads diffuse, conductor, roughconductor, "
                    "plastic, roughplastic, pplastic, dielectric, roughdielectric, thindielectric, twosided, "
-                   "mask, normalmap, bumpmap and blendbsdf")
+                   "mask, normalmap, bumpmap, blendbsdf, principled and principledthin")
         p.done()
         return kind, values
+
+    def principled(self, p: _Plugin) -> dict[str, object]:
+        """The parameters of Mitsuba's ``principled`` or ``principledthin``
+        (``tracer.materials.principled``, ``principledthin``): each a number or a texture (a
+        colour gives its luminance, as Mitsuba's ``eval_1``), in [0, 1] (diff_trans in [0, 2]);
+        principled's eta given or from ``specular`` (not both, as Mitsuba); its spec_trans None
+        where not given (a twosided may wrap the BSDF then)."""
+        thin = p.type == "principledthin"
+
+        def one(name: str, default: float, hi: float = 1.0) -> object:
+            return self.textured(p, name, lambda: float(p.color(name, default, "other", hi=hi) @ LUMINANCE),
+                                 "other")
+
+        kind = principledthin.TYPE if thin else principled.TYPE
+        values: dict[str, object] = {"base_color": self.colour(p, "base_color", 0.5, "reflectance", hi=1.0)}
+        for param in kind.params:
+            if param.size == 1 and param.texture and param.name not in ("eta", "spec_trans"):
+                values[param.name] = one(param.name, float(param.default), float(param.hi))
+        given = p.has("spec_trans") or any(obj.tag == "texture" and written.attrs.get("name") == "spec_trans"
+                                           for obj, written in p.objects)
+        values["spec_trans"] = one("spec_trans", 0.0) if given or thin else None
+        for name in (principledthin.RATES if thin else principled.RATES):
+            values[name] = p.float(name, 1.0, lo=0.0, hi=principled.MAX_SAMPLING_RATE,
+                                   lo_open=name == "main_specular_sampling_rate")
+        if thin:
+            values["eta"] = self.textured(p, "eta", lambda: p.float("eta", 1.5, lo=1.0, hi=plastic.MAX_IOR),
+                                          "other")
+            return values
+        transmits = given and not (isinstance(values["spec_trans"], float) and values["spec_trans"] == 0.0)
+        if p.has("eta") and p.has("specular"):
+            p.fail("give eta or specular, not both (Mitsuba takes one)")
+        if p.has("eta"):
+            eta = p.float("eta", 1.5, lo=1.0, hi=plastic.MAX_IOR)
+            values["eta"] = 1.001 if transmits and eta == 1.0 else eta  # Mitsuba's: eta 1 cannot refract
+        else:
+            specular = p.float("specular", 0.5, lo=0.0, hi=1.0)
+            values["eta"] = principled.eta_of_specular(1e-3 if transmits and specular == 0.0 else specular)
+        return values
 
     def conductor_ior(self, p: _Plugin) -> tuple[np.ndarray, np.ndarray]:
         """eta and k: from ``material`` (Mitsuba's named conductors; default "none", a perfect

@@ -389,9 +389,10 @@ def _read_materials(path: str, table: Any, base: Path, textures: TextureTable) -
         if kind.composite:  # its parts are rows of their own, which this format cannot name yet
             m.fail(f"a {kind.name} is read from Mitsuba XML only (tracer's TOML has no nested materials "
                    "yet)", "type")
-        m.expect(keys.MATERIAL, tuple(p.name for p in kind.params))
+        given = tuple(p for p in kind.params if not p.internal)  # internal ones: set by readers only
+        m.expect(keys.MATERIAL, tuple(p.name for p in given))
         values: dict[str, object] = {}
-        for p in kind.params:
+        for p in given:
             default = ... if p.default is None else p.default
             if p.texture and isinstance(m.raw(p.name, None), dict):
                 values[p.name] = _read_texture(_Reader(path, f"materials.{name}.{p.name}", m.raw(p.name),

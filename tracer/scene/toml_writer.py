@@ -193,7 +193,15 @@ def _material(scene: Scene, row: int) -> list[str]:
     table = scene.materials
     kind = materials.BY_CODE[int(table.kind[row])]
     out = [f"[materials.{_key(table.names[row])}]", f"type = {_string(kind.name)}"]
+    if any(p.internal and p.boolean and table.params[row, kind.column(p.name)] != 0.0
+           for p in kind.params):
+        # A principled inside Mitsuba's twosided, whose back mirrors its front: TOML has no key for it.
+        raise InputError(f"material '{table.names[row]}' is a {kind.name} inside Mitsuba's twosided, which "
+                         "tracer's TOML format does not hold yet: render the XML scene itself",
+                         str(scene.path))
     for p in kind.params:
+        if p.internal:  # set by the readers, never written by a scene
+            continue
         column = kind.column(p.name)
         values = table.params[row, column: column + p.size]
         if p.choices:
