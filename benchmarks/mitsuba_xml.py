@@ -64,6 +64,7 @@ REFERENCES = {
     "projected_lights": (96, 64, 32, 256),
     "anisotropic": (96, 72, 32, 256),
     "textured_emitters": (96, 72, 32, 256),
+    "principled": (96, 72, 32, 256),
 }
 
 # tracer's side of the comparison (--compare and tests/test_mitsuba_agreement.py).
