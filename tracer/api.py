@@ -79,7 +79,8 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
            light_samples: int = 1, bsdf_samples: int = 1, one_sample: bool = False,
            light_selection: str = "power", light_sampling: str | None = None, sampler: str | None = None,
            ris_candidates: int = DEFAULT_RIS_CANDIDATES, ris_sources: str = "light",
-           allocation: str = "fixed", progress: bool = False) -> Image:
+           allocation: str = "fixed", environment_sampling: str = "luminance",
+           progress: bool = False) -> Image:
     """Render ``scene`` (a :class:`Scene`, or a path or dict for :func:`load_scene`) with
     ``spp`` samples per pixel.
 
@@ -96,6 +97,8 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
         (mis: each pixel splits that many samples as earlier passes say is best).
     light_sampling : ``area``, ``solid-angle`` or ``solid-angle-cos`` (default: the scene's
         ``[render] light_sampling``, else ``Strategy``'s default).
+    environment_sampling : ``luminance``, ``uniform`` or ``compensated`` (needs BSDF samples:
+        mis, or ris with BSDF candidates): how the environment is light-sampled.
     sampler : ``independent``, ``stratified`` or ``sobol`` (default: the scene's ``[render]
         sampler``, else ``independent``); the variance is honest for each (``tracer.film``).
     seed : the same seed gives the same bits whatever ``threads`` (default: all cores).
@@ -113,7 +116,7 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
                                          bsdf_samples=bsdf_samples, one_sample=one_sample,
                                          light_selection=light_selection, light_sampling=sampling,
                                          allocation=allocation, ris_candidates=ris_candidates,
-                                         ris_sources=ris_sources)
+                                         ris_sources=ris_sources, environment_sampling=environment_sampling)
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
         raise ValueError(f"spp must be a whole number >= 1, got {spp!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:

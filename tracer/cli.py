@@ -315,6 +315,8 @@ def _add_strategy_options(p: argparse.ArgumentParser, compared: bool = False) ->
         ALLOCATIONS,
         DEFAULT_LIGHT_SAMPLING,
         DEFAULT_RIS_CANDIDATES,
+        ENVIRONMENT_SAMPLING_DOCS,
+        ENVIRONMENT_SAMPLINGS,
         HEURISTICS,
         RIS_SOURCES,
         light_samplings,
@@ -372,6 +374,16 @@ def _add_strategy_options(p: argparse.ArgumentParser, compared: bool = False) ->
                        help=f"ris: candidates per camera sample (default {DEFAULT_RIS_CANDIDATES})")
         p.add_argument("--ris-sources", choices=RIS_SOURCES, default=RIS_SOURCES[0],
                        help=f"ris: where candidates come from: {ris_sources}; default light")
+    environments = "; ".join(f"{name}: {doc}" for name, doc in ENVIRONMENT_SAMPLING_DOCS.items())
+    if compared:
+        p.add_argument("--environment-sampling", type=_names_of(ENVIRONMENT_SAMPLINGS), default=None,
+                       metavar="LIST",
+                       help="comma-separated environment samplings to compare, each with every strategy "
+                       f"that takes light samples and can take it ({environments}; default luminance)")
+    else:
+        p.add_argument("--environment-sampling", choices=ENVIRONMENT_SAMPLINGS, default=None, metavar="NAME",
+                       help=f"how light sampling draws a direction of the environment: {environments} "
+                       "(default luminance)")
     if compared:
         listed = p.add_argument("--light-sampling", type=_names_of(LIGHT_SAMPLINGS), default=None,
                                 metavar="LIST",
@@ -551,6 +563,7 @@ def _strategy_from(args: argparse.Namespace, name: str, light_sampling: str | No
             bsdf_samples=getattr(args, "bsdf_samples", None), one_sample=getattr(args, "one_sample", None),
             light_selection=light_selection or given("light_selection"),
             light_sampling=light_sampling or given("light_sampling"),
+            environment_sampling=given("environment_sampling"),
             allocation=allocation or given("allocation"),
             ris_candidates=candidates, ris_sources=sources)
     except ValueError as exc:
@@ -725,7 +738,8 @@ def cmd_reference(args: argparse.Namespace) -> int:
     film, seed, first, sampler = None, args.seed, 0, args.sampler
     # Strategy's defaults, but the light sampling: None = the scene's [render] default, else area.
     defaults = {name: getattr(Strategy(), name) for name in ("heuristic", "light_samples", "bsdf_samples",
-                                                               "one_sample", "light_selection", "allocation")}
+                                                               "one_sample", "light_selection", "allocation",
+                                                               "environment_sampling")}
     defaults["light_sampling"] = None
     width, height = args.width, args.height
     if args.resume:
@@ -907,7 +921,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     try:
         strategies, ris_heuristic = product_of_options(
             names, heuristics=args.heuristic, allocations=args.allocation, light_samplings=samplings,
-            light_selections=args.light_selection,
+            light_selections=args.light_selection, environment_samplings=args.environment_sampling,
             ris_settings=[(m, sources) for sources in args.ris_sources for m in args.ris_candidates],
             light_samples=args.light_samples, bsdf_samples=args.bsdf_samples, one_sample=args.one_sample)
     except ValueError as exc:

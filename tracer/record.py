@@ -36,7 +36,7 @@ from .strategy import MAX_SAMPLES_PER_CAMERA_SAMPLE
 PREFIX = "tracer:"
 # The fields that define the estimator: renders may be pooled only if all of them agree.
 ESTIMATOR_FIELDS = ("strategy", "heuristic", "light_samples", "bsdf_samples", "one_sample",
-                    "light_selection", "light_sampling", "allocation", "sampler")
+                    "light_selection", "light_sampling", "allocation", "environment_sampling", "sampler")
 MAX_SEED = 2**64 - 1
 MAX_SAMPLE_INDEX = 2**53  # sample counts stay exact in float64
 # (seed, first, next): samples first .. next - 1 of every pixel, drawn with seed.
@@ -84,8 +84,9 @@ class RenderRecord:
     """How a render was made. ``None`` where a file did not say (files of other tools).
 
     strategy, heuristic, light_samples, bsdf_samples, one_sample, light_selection,
-        light_sampling, allocation : the estimator (``tracer.strategy.Strategy``; heuristic ``none`` unless
-        the strategy is mis, light_sampling ``none`` unless it takes light samples).
+        light_sampling, allocation, environment_sampling : the estimator
+        (``tracer.strategy.Strategy``; heuristic ``none`` unless the strategy is mis,
+        light_sampling and environment_sampling ``none`` unless it takes light samples).
     sampler : the random-number sampler (``independent``).
     samples : the sample ranges ``(seed, first, next)`` the film holds (``canonical_ranges``).
     seconds : rendering wall time, summed over the runs pooled into the film.
@@ -101,6 +102,7 @@ class RenderRecord:
     light_selection: str | None = None
     light_sampling: str | None = None
     allocation: str | None = None
+    environment_sampling: str | None = None
     sampler: str | None = None
     samples: tuple[SampleRange, ...] | None = None
     seconds: float | None = None
@@ -208,14 +210,20 @@ def _names() -> dict[str, tuple[str, ...]]:
     with the file's sampler. (The strategy and heuristic are only compared and shown, and other
     tools name theirs as they like: the Mitsuba cross-check writes ``mitsuba-direct``.)"""
     from .sampler_choice import SAMPLERS
-    from .strategy import ALLOCATIONS, LIGHT_SAMPLINGS
+    from .strategy import ALLOCATIONS, ENVIRONMENT_SAMPLINGS, LIGHT_SAMPLINGS
 
-    return {"sampler": SAMPLERS, "light_sampling": (*LIGHT_SAMPLINGS, "none"), "allocation": ALLOCATIONS}
+    return {"sampler": SAMPLERS, "light_sampling": (*LIGHT_SAMPLINGS, "none"), "allocation": ALLOCATIONS,
+            "environment_sampling": (*ENVIRONMENT_SAMPLINGS, "none")}
 
 
 def _old_light_sampling(record: RenderRecord) -> str:
     """What a file written before ``tracer:light_sampling`` existed (tracer <= 0.2) did."""
     return "area" if record.light_samples else "none"
+
+
+def _old_environment_sampling(record: RenderRecord) -> str:
+    """What a file written before ``tracer:environment_sampling`` existed (tracer <= 0.9) did."""
+    return "luminance" if record.light_samples else "none"
 
 
 def _whole(value: Any) -> int:
@@ -267,6 +275,8 @@ def check_mergeable(a: RenderRecord, b: RenderRecord, name_a: str = "the first r
             va, vb = va or _old_light_sampling(a), vb or _old_light_sampling(b)
         if name == "allocation":  # files from before it existed (tracer <= 0.6) had fixed counts
             va, vb = va or "fixed", vb or "fixed"
+        if name == "environment_sampling":  # files from before it existed (tracer <= 0.9) by luminance
+            va, vb = va or _old_environment_sampling(a), vb or _old_environment_sampling(b)
         if va != vb:
             raise InputError(f"cannot pool {name_a} and {name_b}: different {PREFIX}{name} "
                              f"({va!r} and {vb!r})")

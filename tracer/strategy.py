@@ -41,6 +41,13 @@ DEFAULT_RIS_CANDIDATES = 16
 # from the plug-ins' registry (``LIGHT_SAMPLINGS``, ``LIGHT_SELECTIONS``, looked up on first use).
 DEFAULT_LIGHT_SAMPLING = "area"
 DEFAULT_LIGHT_SELECTION = "power"
+# How the environment is light-sampled (``tracer.lights.environment``), the default first.
+ENVIRONMENT_SAMPLINGS = ("luminance", "uniform", "compensated")
+ENVIRONMENT_SAMPLING_DOCS = {
+    "luminance": "cells in proportion to luminance x solid angle (2-D inversion of the map)",
+    "uniform": "uniform on the sphere of directions, p = 1 / (4 pi)",
+    "compensated": "luminance less the map's mean, clamped at 0 (Karlik et al. 2019); needs BSDF samples",
+}
 DEFAULT_HEURISTIC = "power"
 
 # One line each for help texts and the reference pages (``tracer.manual``; a test checks that
@@ -127,6 +134,10 @@ class Strategy:
     allocation : ``fixed`` (the counts above) or ``adaptive`` (mis only: each pixel splits the
         same number of samples between the techniques as earlier passes say is best,
         ``tracer.tuning``).
+    environment_sampling : how a direction of the environment is drawn (``ENVIRONMENT_SAMPLINGS``:
+        ``luminance``, ``uniform``, ``compensated``); used where light samples are. ``compensated``
+        never samples the map's cells below its mean, so it needs BSDF samples to cover them: mis,
+        or ris with BSDF candidates.
 
     Raises ``ValueError`` with a message naming the bad field.
     """
@@ -139,6 +150,7 @@ class Strategy:
     light_selection: str = DEFAULT_LIGHT_SELECTION
     light_sampling: str = DEFAULT_LIGHT_SAMPLING
     allocation: str = "fixed"
+    environment_sampling: str = ENVIRONMENT_SAMPLINGS[0]
 
     def __post_init__(self) -> None:
         if self.name not in STRATEGIES:
@@ -167,6 +179,14 @@ class Strategy:
                                                   and self.bsdf_samples):
             raise ValueError("adaptive allocation splits samples between light and BSDF sampling: it needs "
                              "the mis strategy with light_samples >= 1 and bsdf_samples >= 1")
+        if self.environment_sampling not in ENVIRONMENT_SAMPLINGS:
+            raise ValueError(f"unknown environment sampling {self.environment_sampling!r}; expected one of "
+                             f"{', '.join(ENVIRONMENT_SAMPLINGS)}")
+        if self.environment_sampling == "compensated" and self.light_count and not (
+                self.direction_technique == "bsdf" and self.direction_count):
+            raise ValueError("compensated environment sampling leaves the map's cells below its mean to BSDF "
+                             "samples: it needs mis, or ris with BSDF candidates (light sampling alone would "
+                             "miss their light)")
         if self.name == "ris" and self.heuristic == "optimal" and self.bsdf_samples:
             raise ValueError("ris cannot use the optimal heuristic: its weights may be negative, and ris "
                              "resamples in proportion to them (use balance, power or max)")
@@ -193,6 +213,8 @@ class Strategy:
         selection = picked.get(self.light_selection, "") if self.light_count else ""
         if self.light_count and self.light_sampling != DEFAULT_LIGHT_SAMPLING:
             selection += f", {self.light_sampling} light sampling"
+        if self.light_count and self.environment_sampling != ENVIRONMENT_SAMPLINGS[0]:
+            selection += f", {self.environment_sampling} environment"
         if self.name == "mis":
             mode = "one-sample, " if self.one_sample else ""
             split = ", adaptive allocation" if self.adaptive else ""
@@ -232,6 +254,8 @@ class Strategy:
             parts.append(self.light_sampling)
         if self.light_count and self.light_selection != DEFAULT_LIGHT_SELECTION:
             parts.append(f"{self.light_selection}-lights")
+        if self.light_count and self.environment_sampling != ENVIRONMENT_SAMPLINGS[0]:
+            parts.append(f"{self.environment_sampling}-environment")
         return "_".join(parts)
 
     @classmethod
@@ -240,13 +264,14 @@ class Strategy:
                      one_sample: bool | None = None,
                      light_selection: str | None = None, light_sampling: str | None = None,
                      allocation: str | None = None, ris_candidates: int | None = None,
-                     ris_sources: str | None = None) -> "Strategy":
+                     ris_sources: str | None = None, environment_sampling: str | None = None) -> "Strategy":
         """The strategy of the command line's, the API's and a check entry's options, None
         meaning the default (the field defaults of this class, ``DEFAULT_RIS_CANDIDATES``,
         ``RIS_SOURCES[0]``). ``ris`` takes its counts from ``ris_candidates`` and
         ``ris_sources``, the others from ``light_samples`` and ``bsdf_samples``. Raises
         ``ValueError`` naming the bad option."""
-        given = {"heuristic": heuristic, "light_selection": light_selection, "light_sampling": light_sampling}
+        given = {"heuristic": heuristic, "light_selection": light_selection, "light_sampling": light_sampling,
+                 "environment_sampling": environment_sampling}
         given = {k: v for k, v in given.items() if v is not None}
         if name == "ris":
             return cls.ris(DEFAULT_RIS_CANDIDATES if ris_candidates is None else ris_candidates,
@@ -262,7 +287,7 @@ class Strategy:
                 "light_samples": int(self.light_count), "bsdf_samples": int(self.direction_count),
                 "one_sample": bool(self.one_sample),
                 "light_selection": self.light_selection, "light_sampling": self.recorded_light_sampling,
-                "allocation": self.allocation}
+                "allocation": self.allocation, "environment_sampling": self.recorded_environment_sampling}
 
     @classmethod
     def from_record(cls, record) -> "Strategy":
@@ -277,7 +302,8 @@ class Strategy:
             raise ValueError("the record names no strategy")
         return cls(field("strategy"), **{name: field(name) for name in
                                          ("heuristic", "light_samples", "bsdf_samples", "one_sample",
-                                          "light_selection", "light_sampling", "allocation")
+                                          "light_selection", "light_sampling", "allocation",
+                                          "environment_sampling")
                                          if field(name) is not None})
 
     @property
@@ -304,6 +330,12 @@ class Strategy:
     def recorded_light_sampling(self) -> str:
         """The light sampling as records state it: ``none`` unless the strategy takes light samples."""
         return self.light_sampling if self.light_count else "none"
+
+    @property
+    def recorded_environment_sampling(self) -> str:
+        """The environment sampling as records state it: ``none`` unless the strategy takes light
+        samples."""
+        return self.environment_sampling if self.light_count else "none"
 
     @property
     def adaptive(self) -> bool:

@@ -75,7 +75,8 @@ class DirectLighting:
         self.strategy = strategy
         self.rays = SceneRays(scene, caster)
         self.caster = self.rays.caster
-        self.lights = LightSampler(scene, strategy.light_selection, strategy.light_sampling)
+        self.lights = LightSampler(scene, strategy.light_selection, strategy.light_sampling,
+                                   strategy.environment_sampling)
         self.combiner = plugins.get("combiner", combiner_of(strategy))
         # ris's BSDF candidates find their emitter without the occluders.
         self.emitter_rays = SceneRays(scene, emitters_only=True) \

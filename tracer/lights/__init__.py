@@ -175,15 +175,16 @@ def techniques_for(light_sampling: str) -> dict[str, plugins.LightTechnique]:
     return chosen
 
 
-def build_tables(scene, light_selection: str = "power",
-                 light_sampling: str = "area") -> tuple[LightTables, np.ndarray]:
+def build_tables(scene, light_selection: str = "power", light_sampling: str = "area",
+                 environment_sampling: str = "luminance") -> tuple[LightTables, np.ndarray]:
     """The light tables of ``scene`` (a ``tracer.scene.Scene``), and ``(K,)`` the shape index of
     each candidate (-1 - i for point light i).
 
     Candidates (``tracer.lights.emitters``): every emitting triangle of positive area (a
     rectangular quad is one candidate instead of two triangles where the light sampling has a
     technique for rectangles), every emitting analytic sphere and every point light of positive
-    intensity, in that order; their techniques follow ``light_sampling``."""
+    intensity, in that order; their techniques follow ``light_sampling``, the environment's
+    ``environment_sampling`` (``tracer.lights.environment.SAMPLINGS``)."""
     selection = plugins.get("light_selection", light_selection)
     chosen = techniques_for(light_sampling)
     tri = emitters.emitting_triangles(scene)
@@ -234,7 +235,7 @@ def build_tables(scene, light_selection: str = "power",
     # two triangles bound it exactly).
     spheres = emitter_spheres(scene.vertices[scene.faces[tri]], scene.shape_of_triangle[tri],
                               scene.ray_epsilon, records["sphere"].spheres, records["sphere"].owner)
-    environment = environment_light.table(scene.environment, environment_candidate)
+    environment = environment_light.table(scene.environment, environment_candidate, environment_sampling)
     rows = np.concatenate([rows, *appended]) if appended else rows
     return LightTables(tables, technique, np.ascontiguousarray(rows), candidate_of_prim, spheres,
                        environment, prims), candidates.owner
@@ -277,11 +278,12 @@ class LightSampler:
     ``bvh`` selection's depend on the point).
     """
 
-    def __init__(self, scene, selection: str = "power", sampling: str = "area"):
+    def __init__(self, scene, selection: str = "power", sampling: str = "area",
+                 environment_sampling: str = "luminance"):
         self.scene = scene
         self.selection = selection
         self.sampling = sampling
-        self.tables, self.owner = build_tables(scene, selection, sampling)
+        self.tables, self.owner = build_tables(scene, selection, sampling, environment_sampling)
         self.pmf = self.tables.selection.pmf
         self.count = len(self.pmf)
 

@@ -22,10 +22,24 @@ phi uniform). So the pdf is constant on each cell,
 with no 1 / sin theta at the poles (a pixel-based map sampled uniformly in (u, t) has
 p(w) = p(u, t) / (2 pi^2 sin theta) instead). Luminance is Rec. 709's Y.
 
+**Techniques** (``SAMPLINGS``, a strategy's ``environment_sampling``): the same inversion over
+other cell weights, so every one has an exact pdf and one kernel serves them all:
+
+- ``luminance`` (the default): the weights above;
+- ``uniform``: weight = the cell's solid angle, so p(w) = 1 / (4 pi) everywhere (the baseline
+  the others are measured against);
+- ``compensated``: Karlik et al.'s MIS compensation ("MIS Compensation: Optimizing Sampling
+  Techniques in Multiple Importance Sampling", SIGGRAPH Asia 2019): the cell's mean luminance
+  less the map's solid-angle mean, clamped at 0, times its solid angle. Cells dimmer than the
+  mean are never light-sampled, which leaves them to BSDF sampling: the estimate stays unbiased
+  only where MIS with BSDF samples covers them, so a strategy without BSDF samples cannot take
+  it (``tracer.strategy``). A map with no cell above its mean (a constant one) keeps the
+  ``luminance`` weights, as pbrt-v4 falls back.
+
 The environment is one light candidate, the last (``tracer.lights.emitters``), whose flux for
 the ``power`` selection is pi r^2 times the integral of its mean radiance over the sphere, r
 the radius of the scene's bounding sphere (what a disk of the scene's size would catch, as
-pbrt-v4 estimates an infinite light's power).
+pbrt-v4 estimates an infinite light's power), whatever the technique.
 """
 
 from __future__ import annotations
@@ -36,8 +50,11 @@ from typing import NamedTuple
 import numpy as np
 
 from ..jit import jit
+from ..strategy import ENVIRONMENT_SAMPLINGS
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+# The environment's light-sampling techniques (module docstring), the default first.
+SAMPLINGS = ENVIRONMENT_SAMPLINGS
 
 
 class EnvironmentTable(NamedTuple):
@@ -74,15 +91,32 @@ def cell_weights(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean * solid_angle, solid_angle
 
 
-def table(environment, candidate: int) -> EnvironmentTable:
+def sampling_weights(luminance: np.ndarray, sampling: str = "luminance") -> tuple[np.ndarray, np.ndarray]:
+    """``(weight (R, W), solid_angle (R, W))``: the cells' weights under technique ``sampling``
+    (``SAMPLINGS``, module docstring) of a map of luminance ``(H, W)``."""
+    if sampling not in SAMPLINGS:
+        raise ValueError(f"unknown environment sampling {sampling!r}; expected one of {', '.join(SAMPLINGS)}")
+    weight, solid_angle = cell_weights(luminance)
+    if sampling == "uniform":
+        return solid_angle.copy(), solid_angle
+    if sampling == "compensated":
+        mean = weight.sum() / solid_angle.sum()  # the map's mean luminance over the sphere
+        compensated = np.maximum(weight / solid_angle - mean, 0.0) * solid_angle
+        if compensated.sum() > 0.0:
+            return compensated, solid_angle
+    return weight, solid_angle
+
+
+def table(environment, candidate: int, sampling: str = "luminance") -> EnvironmentTable:
     """The kernels' table of ``environment`` (``tracer.scene.environment.Environment``, or None
-    for a table that nothing reads), light candidate ``candidate`` (-1: not sampled)."""
+    for a table that nothing reads), light candidate ``candidate`` (-1: not sampled), sampled
+    by technique ``sampling`` (``SAMPLINGS``)."""
     if environment is None:
         return EnvironmentTable(np.zeros((2, 2, 3), dtype=np.float32), np.eye(3), np.eye(3), np.zeros(2),
                                 np.zeros((1, 3)), np.zeros((1, 2)), np.ones(2), -1)
     texels = environment.texels
     height, width = texels.shape[:2]
-    weight, solid_angle = cell_weights(texels.astype(np.float64) @ LUMINANCE)
+    weight, solid_angle = sampling_weights(texels.astype(np.float64) @ LUMINANCE, sampling)
     row_weight = weight.sum(axis=1)
     total = row_weight.sum()
     row_cdf = _cdf(row_weight)

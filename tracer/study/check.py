@@ -91,6 +91,7 @@ from ..scene import Scene, load_scene, resolve_scene, shipped_scenes
 from ..scene.shipped import shipped_names, shipped_scene_named
 from ..strategy import (
     DEFAULT_LIGHT_SAMPLING,
+    ENVIRONMENT_SAMPLINGS,
     HEURISTICS,
     LIGHT_SAMPLINGS,
     LIGHT_SELECTIONS,
@@ -133,6 +134,7 @@ class Entry:
     bsdf_samples: int = 1
     light_sampling: str = DEFAULT_LIGHT_SAMPLING
     light_selection: str = "power"
+    environment_sampling: str = ENVIRONMENT_SAMPLINGS[0]
     sampler: str = DEFAULT_SAMPLER
     downsample: int = 4
     pixel_test: bool = True
@@ -151,6 +153,8 @@ class Entry:
             label += f"-{self.light_sampling}"
         if self.light_selection != "power":
             label += f"-{self.light_selection}-lights"
+        if self.environment_sampling != ENVIRONMENT_SAMPLINGS[0]:
+            label += f"-{self.environment_sampling}-environment"
         if self.sampler != DEFAULT_SAMPLER:
             label += f"-{self.sampler}"
         return f"{self.scene}/{label}"
@@ -168,6 +172,7 @@ class Entry:
         return {k: v for k, v in self.__dict__.items() if v is not None and v != ""
                 and not (k == "light_sampling" and v == DEFAULT_LIGHT_SAMPLING)
                 and not (k == "light_selection" and v == "power")
+                and not (k == "environment_sampling" and v == ENVIRONMENT_SAMPLINGS[0])
                 and not (k == "sampler" and v == DEFAULT_SAMPLER)}
 
 
@@ -359,6 +364,8 @@ def _field_problem(name: str, value: Any, raw: dict[str, Any]) -> str | None:
         return None if value in LIGHT_SAMPLINGS else f"one of {', '.join(LIGHT_SAMPLINGS)}"
     if name == "light_selection":
         return None if value in LIGHT_SELECTIONS else f"one of {', '.join(LIGHT_SELECTIONS)}"
+    if name == "environment_sampling":
+        return None if value in ENVIRONMENT_SAMPLINGS else f"one of {', '.join(ENVIRONMENT_SAMPLINGS)}"
     if name == "sampler":
         return None if value in SAMPLERS else f"one of {', '.join(SAMPLERS)}"
     if name == "spp":

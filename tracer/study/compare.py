@@ -74,12 +74,14 @@ EXTRAPOLATION_LIMIT = 4.0
 def product_of_options(names: list[str], *, heuristics: list[str], allocations: list[str],
                        light_samplings: list[str | None], light_selections: list[str | None],
                        ris_settings: list[tuple[int, str]], light_samples: int | None = None,
-                       bsdf_samples: int | None = None,
-                       one_sample: bool | None = None) -> tuple[list[Strategy], str]:
+                       bsdf_samples: int | None = None, one_sample: bool | None = None,
+                       environment_samplings: list[str | None] | None = None) -> tuple[list[Strategy], str]:
     """Every strategy a comparison of the strategy ``names`` runs, with lists of options: mis with
     every heuristic and allocation, ris with every ``(candidates, sources)`` of ``ris_settings``,
-    each strategy that takes light samples with every light sampling and selection (those that
-    take none once; None is the default), in that order. Returns them with the heuristic ris
+    each strategy that takes light samples with every light sampling, selection and environment
+    sampling (those that take none once; None is the default), in that order; a strategy that
+    cannot take an environment sampling (``compensated`` without BSDF samples) is left out of
+    that one, unless it is the only one asked for. Returns them with the heuristic ris
     weights its candidates with: the first classic one given (optimal weights may be negative).
     Raises ``ValueError`` naming the option that cannot be."""
     from ..strategy import CLASSIC_HEURISTICS
@@ -90,13 +92,24 @@ def product_of_options(names: list[str], *, heuristics: list[str], allocations: 
                          "(optimal weights may be negative); add one of them to the list")
     ris_heuristic = (classic or ["power"])[0]
 
-    def make(name, ris=None, heuristic=None, allocation=None, sampling=None, selection=None) -> Strategy:
+    environments = environment_samplings or [None]
+
+    def make(name, ris=None, heuristic=None, allocation=None, sampling=None, selection=None,
+             environment=None) -> Strategy:
         candidates, sources = ris or (None, None)
         return Strategy.from_options(name, heuristic=heuristic, light_samples=light_samples,
                                      bsdf_samples=bsdf_samples, one_sample=one_sample,
                                      light_selection=selection, light_sampling=sampling,
                                      allocation=allocation, ris_candidates=candidates,
-                                     ris_sources=sources)
+                                     ris_sources=sources, environment_sampling=environment)
+
+    def takes(name, ris, environment) -> bool:
+        """Whether strategy ``name`` can take environment sampling ``environment``."""
+        try:
+            make(name, ris, environment=environment)
+        except ValueError:
+            return False
+        return True
 
     def weightings(name):
         if name == "mis":
@@ -107,10 +120,14 @@ def product_of_options(names: list[str], *, heuristics: list[str], allocations: 
     for name in names:
         for ris in ris_settings if name == "ris" else [None]:
             takes_lights = make(name, ris).light_count > 0
-            strategies += [make(name, ris, heuristic, allocation, sampling, selection)
+            offered = [e for e in environments if takes(name, ris, e)] if takes_lights else environments[:1]
+            if not offered and len(environments) > 1:
+                continue  # e.g. light with only compensated asked besides others: nothing it can take
+            strategies += [make(name, ris, heuristic, allocation, sampling, selection, environment)
                            for heuristic, allocation in weightings(name)
                            for sampling in (light_samplings if takes_lights else light_samplings[:1])
-                           for selection in (light_selections if takes_lights else light_selections[:1])]
+                           for selection in (light_selections if takes_lights else light_selections[:1])
+                           for environment in (offered or environments[:1])]
     return strategies, ris_heuristic
 
 
@@ -625,6 +642,7 @@ def run_row(run: Run) -> dict[str, object]:
                               "light_samples": run.strategy.light_count,
                               "bsdf_samples": run.strategy.direction_count,
                               "light_sampling": run.strategy.recorded_light_sampling,
+                              "environment_sampling": run.strategy.recorded_environment_sampling,
                               "light_selection": run.strategy.light_selection if run.strategy.light_count
                               else "none", "sampler": run.sampler,
                               "spp": run.spp, "seconds": run.seconds, "clock": run.clock,

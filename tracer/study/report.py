@@ -431,7 +431,7 @@ def write_tables(out: Path, document: dict[str, Any]) -> None:
     safe = json_safe(document)
     write_text(out / "metrics.json", json.dumps(safe, indent=2, allow_nan=False) + "\n")
     columns = ["name", "strategy", "heuristic", "allocation", "light_samples", "bsdf_samples",
-               "light_sampling", "sampler",
+               "light_sampling", "environment_sampling", "sampler",
                "spp", "seconds", "budget", "clock",
                "wall_seconds", "cpu_seconds", "mse", "relmse", "variance", "efficiency", "flip",
                "mse_uncorrected", "relmse_uncorrected"]
