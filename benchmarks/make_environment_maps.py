@@ -2,6 +2,7 @@
 ``tracer.scene.environment``), deterministically, from formulas: nothing photographed.
 
     python benchmarks/make_environment_maps.py [OUT_DIR]   (default tracer/scenes/mitsuba/textures)
+    python benchmarks/make_environment_maps.py --cases [DIR]  (default tracer/study/cases)
 
 - ``sky.exr`` (128 x 64): a sky brightening toward the horizon over a dim brown ground, a sun of
   angular radius 3 degrees and radiance 400 at 35 degrees above the horizon toward +x, -z, and a
@@ -9,6 +10,15 @@
   (a mirrored or rotated map) shows in any test image.
 - ``studio.exr`` (128 x 64): black, with three bright rectangles (a key, a fill and a rim light
   of radiance 40, 12 and 25): most of the sphere sends nothing, which light sampling must find.
+
+With ``--cases``, the stability suite's maps (``tracer.study.stability``):
+
+- ``tiny_sun.exr`` (256 x 128): a dim sky (0.05) over a darker ground (0.02) and one texel of
+  radiance 30000 at 40 degrees from the zenith: a sun a few 1e-4 sr across (its bilinear
+  footprint), which sends almost all the light and which uniform sphere sampling and BSDF
+  sampling rarely find;
+- ``near_uniform_sky.exr`` (64 x 32): radiance 1 within 2% everywhere (a smooth ripple), where
+  importance sampling can gain nothing over uniform sampling.
 
 Values are half floats (OpenEXR's HALF), which OpenImageIO and Mitsuba read to the same floats.
 """
@@ -71,6 +81,23 @@ def studio() -> np.ndarray:
     return rgb
 
 
+def tiny_sun() -> np.ndarray:
+    width, height = 256, 128
+    d = directions(width, height)
+    rgb = np.where((d[..., 1] >= 0.0)[..., None], np.array([0.04, 0.05, 0.07]), np.array([0.02, 0.02, 0.02]))
+    row = int(round(np.radians(40.0) / np.pi * (height - 1)))
+    rgb[row, width // 8] = 30000.0
+    return rgb
+
+
+def near_uniform_sky() -> np.ndarray:
+    width, height = 64, 32
+    u = (np.arange(width) + 0.5) / width
+    t = np.arange(height) / (height - 1)
+    ripple = 1.0 + 0.02 * np.sin(2.0 * np.pi * 3.0 * u)[None, :] * np.cos(np.pi * 2.0 * t)[:, None]
+    return np.repeat(ripple[..., None], 3, axis=2)
+
+
 def write(path: pathlib.Path, rgb: np.ndarray) -> None:
     import OpenImageIO as oiio
 
@@ -83,9 +110,15 @@ def write(path: pathlib.Path, rgb: np.ndarray) -> None:
 
 
 def main() -> None:
-    out = pathlib.Path(sys.argv[1]) if len(sys.argv) > 1 else OUT
+    args = sys.argv[1:]
+    cases = bool(args) and args[0] == "--cases"
+    if cases:
+        args = args[1:]
+    out = pathlib.Path(args[0]) if args else (ROOT / "tracer" / "study" / "cases" if cases else OUT)
     out.mkdir(parents=True, exist_ok=True)
-    for name, make in (("sky.exr", sky), ("studio.exr", studio)):
+    maps = ((("tiny_sun.exr", tiny_sun), ("near_uniform_sky.exr", near_uniform_sky)) if cases
+            else (("sky.exr", sky), ("studio.exr", studio)))
+    for name, make in maps:
         write(out / name, make())
         print(f"wrote {out / name}")
 

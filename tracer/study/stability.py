@@ -40,13 +40,20 @@ from ..strategy import STRATEGIES, Strategy
 from . import metrics, statistics
 
 # The suite's columns: every strategy, then light and MIS with each solid-angle light sampling
-# (``tracer.lights``), then light, MIS and ris with lights picked by a light BVH, as (column,
-# strategy, light sampling, light selection).
-COLUMNS = tuple((name, name, "area", "power") for name in STRATEGIES) + tuple(
-    (f"{name}_{sampling}", name, sampling, "power") for name in ("light", "mis")
+# (``tracer.lights``), then light, MIS and ris with lights picked by a light BVH, then (on the
+# cases with an environment only: ``Case.environment``) light and MIS with the environment
+# sampled uniformly and MIS with it compensated, as (column, strategy, light sampling, light
+# selection, environment sampling).
+COLUMNS = tuple((name, name, "area", "power", "luminance") for name in STRATEGIES) + tuple(
+    (f"{name}_{sampling}", name, sampling, "power", "luminance") for name in ("light", "mis")
     for sampling in ("solid-angle", "solid-angle-cos")) + tuple(
-    (f"{name}_bvh", name, "area", "bvh") for name in ("light", "mis", "ris"))
-COLUMN_NAMES = tuple(column for column, _, _, _ in COLUMNS)
+    (f"{name}_bvh", name, "area", "bvh", "luminance") for name in ("light", "mis", "ris")) + (
+    ("light_uniform-env", "light", "area", "power", "uniform"),
+    ("mis_uniform-env", "mis", "area", "power", "uniform"),
+    ("mis_compensated-env", "mis", "area", "power", "compensated"))
+COLUMN_NAMES = tuple(column for column, *_ in COLUMNS)
+# The columns that differ from another only in how the environment is sampled.
+ENVIRONMENT_COLUMNS = tuple(column for column, *_, environment in COLUMNS if environment != "luminance")
 # ris takes this many times the case's light and BSDF samples as candidates (4 + 4 by default).
 RIS_CANDIDATE_FACTOR = 4
 SIZE = 32
@@ -66,6 +73,9 @@ class Case:
     veach : the technique Veach's bound is checked against: the one that handles this case
         well, so that its variance is estimated reliably (the other one's is underestimated
         where it almost never finds the light). None: not checked.
+    environment : the scene has an environment: the ``ENVIRONMENT_COLUMNS`` run on it too.
+    untestable : columns left out of the bias test although their strategy is ``testable``
+        (heavy-tailed there at the suite's spp: a normal bound on the image mean does not hold).
     """
 
     name: str
@@ -77,16 +87,24 @@ class Case:
     bsdf_samples: int = 1
     veach: str | None = None
     size: int = SIZE
+    environment: bool = False
+    untestable: tuple[str, ...] = ()
 
     @property
     def path(self) -> Path:
         return CASE_DIR / f"{self.scene or self.name}.toml"
 
+    @property
+    def columns(self) -> tuple[tuple[str, str, str, str, str], ...]:
+        """The suite's columns this case runs (``COLUMNS``)."""
+        return tuple(c for c in COLUMNS if self.environment or c[0] not in ENVIRONMENT_COLUMNS)
+
     def strategy(self, name: str, heuristic: str = "power", light_sampling: str = "area",
-                 light_selection: str = "power") -> Strategy:
+                 light_selection: str = "power", environment_sampling: str = "luminance") -> Strategy:
         factor = RIS_CANDIDATE_FACTOR if name == "ris" else 1
         return Strategy(name, heuristic, factor * self.light_samples, factor * self.bsdf_samples,
-                        light_sampling=light_sampling, light_selection=light_selection)
+                        light_sampling=light_sampling, light_selection=light_selection,
+                        environment_sampling=environment_sampling)
 
 
 def cases(size: int = SIZE) -> list[Case]:
@@ -126,6 +144,12 @@ def cases(size: int = SIZE) -> list[Case]:
         Case("dim_light_near", "power selection rarely picks the near, dim light", testable=("mis", "ris")),
         Case("occluded_bright_light", "RIS's unshadowed target ranks a hidden light first",
              testable=("bsdf", "cosine", "mis")),
+        Case("tiny_sun_environment", "a tiny hot sun in a dim sky (environment map)", environment=True,
+             testable=("light", "mis"), untestable=("light_uniform-env", "mis_uniform-env")),
+        Case("mirror_environment", "ideal mirror under a sky (environment map)", environment=True,
+             blind=("uniform", "cosine", "light"), testable=("bsdf", "mis")),
+        Case("near_uniform_environment", "a near-uniform sky (environment map): importance gains nothing",
+             environment=True, testable=STRATEGIES),
     ]
     for scale in ("0.001", "1000"):
         out.append(Case(f"scaled_{scale}", f"a small quad light, every length x {scale}"))
@@ -183,9 +207,10 @@ def run_case(
         scene, Strategy("mis"), RenderSettings(spp=reference_spp, seed=seed + 1_000_000, threads=threads)
     ).film
     cells = []
-    for column, name, sampling, selection in COLUMNS:
+    for column, name, sampling, selection, environment in case.columns:
         settings = RenderSettings(spp=spp, seed=seed, threads=threads, sampler=sampler)
-        strategy = case.strategy(name, light_sampling=sampling, light_selection=selection)
+        strategy = case.strategy(name, light_sampling=sampling, light_selection=selection,
+                                 environment_sampling=environment)
         result = render_complete(scene, strategy, settings)
         film = result.film
         cells.append(
@@ -199,7 +224,7 @@ def run_case(
                 mean=film.mean.mean(axis=0).tolist(),
                 reference_mean=reference.mean.mean(axis=0).tolist(),
                 blind=name in case.blind,
-                testable=name in case.testable and name not in case.blind,
+                testable=name in case.testable and name not in case.blind and column not in case.untestable,
                 zero=bool(np.all(film.mean == 0.0)),
             )
         )
@@ -332,8 +357,10 @@ def format_table(cells: list[Cell]) -> str:
         row = {c.strategy: c for c in cells if c.case == name}
         parts = []
         for s in COLUMN_NAMES:
-            c = row[s]
-            if c.blind:
+            c = row.get(s)
+            if c is None:  # an environment column on a case without one
+                parts.append(f"{'-':>27}")
+            elif c.blind:
                 parts.append(f"{'blind (' + ('zero' if c.zero else 'NOT ZERO') + ')':>27}")
             else:
                 parts.append(f"{c.relmse:>9.3g} {c.z:>+6.2f} {c.nonfinite:>4d} {c.seconds:>6.2f}")
@@ -350,7 +377,7 @@ def heat_map(cells: list[Cell], path: Path) -> None:
 
     names = list(dict.fromkeys(c.case for c in cells))
     grid = np.full((len(names), len(COLUMN_NAMES)), np.nan)
-    fig, ax = plt.subplots(figsize=(14, 0.5 * len(names) + 2.4))
+    fig, ax = plt.subplots(figsize=(17, 0.5 * len(names) + 2.4))
     for c in cells:
         i, j = names.index(c.case), COLUMN_NAMES.index(c.strategy)
         if not c.blind:
