@@ -30,11 +30,14 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from efficiency_runs import measure  # noqa: E402  (benchmarks/ is no package)
+from efficiency_runs import mitsuba_child as _mitsuba
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -88,7 +91,7 @@ def tracer_runs(name: str, args) -> list[dict]:
     from tracer.imagefiles import read_exr
     from tracer.scene import load_scene
     from tracer.strategy import Strategy
-    from tracer.study.compare import Comparison, independent_seeds
+    from tracer.study.compare import independent_seeds
 
     reference = read_exr(ROOT / "renders" / "references" / f"{name}.exr")
     scene = load_scene(ROOT / "scenes" / f"{name}.toml", args.size, args.size)
@@ -96,20 +99,9 @@ def tracer_runs(name: str, args) -> list[dict]:
     rows = []
     for strategy_name in ("light", "mis"):
         for sampling in SAMPLINGS:
-            strategy = Strategy(strategy_name, light_sampling=sampling)
-            row = {"scene": name, "strategy": strategy_name, "light_sampling": sampling,
-                   "equal_spp": [], "equal_time": []}
-            for seed in seeds:
-                comparison = Comparison(scene, reference, seed, args.threads)
-                for kind, run in (("equal_spp", comparison.equal_spp(strategy, args.spp)),
-                                  ("equal_time", comparison.equal_time(strategy, args.time))):
-                    row[kind].append({"seed": seed, "spp": run.spp, "seconds": run.seconds,
-                                      "relmse": run.measures["relmse"]})
-            for kind in ("equal_spp", "equal_time"):
-                rel = sum(r["relmse"] for r in row[kind]) / len(row[kind])
-                sec = sum(r["seconds"] for r in row[kind]) / len(row[kind])
-                row[f"{kind}_relmse"], row[f"{kind}_seconds"] = rel, sec
-                row[f"{kind}_efficiency"] = 1.0 / (rel * sec)
+            row = measure(scene, reference, Strategy(strategy_name, light_sampling=sampling), seeds,
+                          args.spp, args.time, args.threads,
+                          {"scene": name, "strategy": strategy_name, "light_sampling": sampling})
             row.update(zero_shares(scene, sampling))
             print(f"  {name} {strategy_name} {sampling}: equal spp relMSE {row['equal_spp_relmse']:.4g}, "
                   f"equal time relMSE {row['equal_time_relmse']:.4g} "
@@ -177,11 +169,7 @@ def mitsuba_run(python: str, name: str, args, seconds_target: float) -> dict:
 
 
 def _child(python: str, spec: dict) -> dict:
-    proc = subprocess.run([python, str(Path(__file__).resolve()), "--mitsuba-child", json.dumps(spec)],
-                          capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise RuntimeError(f"Mitsuba child failed: {proc.stderr.strip()[-2000:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return _mitsuba(python, Path(__file__).resolve(), spec)
 
 
 def markdown(results: dict) -> str:

@@ -65,6 +65,7 @@ REFERENCES = {
     "anisotropic": (96, 72, 32, 256),
     "textured_emitters": (96, 72, 32, 256),
     "principled": (96, 72, 32, 256),
+    "environment_studio": (96, 72, 32, 256),
 }
 
 # tracer's side of the comparison (--compare and tests/test_mitsuba_agreement.py).

@@ -127,7 +127,7 @@ def plugins_page() -> str:
 
     out = ["# Strategies and plug-ins\n", GENERATED,
            "What a render can be asked for: the strategies and their options (`--strategy`, "
-           "`--heuristic`, `--allocation`, `--ris-sources`), then every plug-in registered in "
+           "`--heuristic`, `--allocation`, `--ris-sources`, `--environment-sampling`), then every plug-in registered in "
            "`tracer.plugins`, kind by kind, with what it declares. A user's own plug-in "
            "appears here once its module is imported (see the developer guide).\n",
            "## Strategies\n",
@@ -141,7 +141,10 @@ def plugins_page() -> str:
                  [(code(a), strategy.ALLOCATION_DOCS[a]) for a in strategy.ALLOCATIONS]),
            "## RIS candidate sources\n",
            table(("source", "where `ris`'s candidates come from"),
-                 [(code(s), strategy.RIS_SOURCE_DOCS[s]) for s in strategy.RIS_SOURCES])]
+                 [(code(s), strategy.RIS_SOURCE_DOCS[s]) for s in strategy.RIS_SOURCES]),
+           "## Environment sampling\n",
+           table(("environment sampling", "how `--environment-sampling` light-samples an environment map"),
+                 [(code(s), strategy.ENVIRONMENT_SAMPLING_DOCS[s]) for s in strategy.ENVIRONMENT_SAMPLINGS])]
     kinds = {
         "material": ("Materials", "`type` of a `[materials.NAME]` table"),
         "light_technique": ("Light techniques", "how a light sample draws a direction toward one emitter"),
