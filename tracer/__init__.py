@@ -14,7 +14,7 @@ render(scene, strategy="mis", spp=64, seed=0, **options) -> Image
 read_image(path) -> Image
 compare(image, reference, seconds=None) -> dict of mse, relmse, variance, efficiency
 Strategy(name, heuristic, light_samples, bsdf_samples, one_sample, light_selection, light_sampling,
-         allocation)
+         allocation, environment_sampling)
 Strategy.ris(candidates, sources, **fields) -> the ris strategy
 STRATEGIES, LIGHT_SAMPLINGS, LIGHT_SELECTIONS : the strategy, light-sampling and selection names.
 
