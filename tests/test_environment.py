@@ -394,6 +394,29 @@ def test_digest_tells_environments_apart(tmp_path):
     assert a.digest != b.digest and b.digest == c.digest
 
 
+def test_an_environment_map_converts_to_a_reference_to_its_file(tmp_path):
+    """``tracer convert`` writes a map as ``[environment] map`` (the image file, relative to the
+    TOML), ``scale`` and ``to_world``: the TOML reads back as the same scene (same digest), from
+    another folder too. A map whose file is gone is refused in one line, nothing written."""
+    import shutil
+
+    from tracer.scene.toml_writer import write_scene
+
+    shutil.copy(shipped_folder() / "mitsuba" / "textures" / "sky.exr", tmp_path / "sky.exr")
+    scene = tracer.load_scene(_write_scene(tmp_path, '<emitter type="envmap"><string name="filename" '
+                                                     'value="sky.exr"/><float name="scale" value="0.3"/>'
+                                                     '<transform name="to_world"><rotate y="1" angle="-40"/>'
+                                                     '</transform></emitter>'))
+    (tmp_path / "out").mkdir()
+    write_scene(scene, tmp_path / "out" / "back.toml", "scene.xml")
+    assert 'map = "../sky.exr"' in (tmp_path / "out" / "back.toml").read_text()
+    assert tracer.load_scene(str(tmp_path / "out" / "back.toml")).digest == scene.digest
+    (tmp_path / "sky.exr").unlink()
+    with pytest.raises(InputError, match="environment map whose image file is not known or not there"):
+        write_scene(scene, tmp_path / "gone.toml", "scene.xml")
+    assert not (tmp_path / "gone.toml").exists()
+
+
 def test_a_constant_environment_converts_to_toml_and_back(tmp_path):
     """``tracer convert`` writes a constant environment as ``[environment] radiance``, and the
     TOML reads back as the same scene (same digest)."""

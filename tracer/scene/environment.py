@@ -38,6 +38,8 @@ class Environment:
     kind : ``envmap`` (a map from ``source``) or ``constant``.
     source : the image file a map came from ("" for a constant), as the scene names it.
     scale : the factor applied to the file's texels (kept so that a converted scene says it).
+    file : that image file's path as found (the scene's folder or Mitsuba's search path), which
+        a converted scene refers to ("": unknown).
     """
 
     texels: np.ndarray
@@ -45,6 +47,7 @@ class Environment:
     kind: str = "envmap"
     source: str = ""
     scale: float = 1.0
+    file: str = ""
 
     def __post_init__(self) -> None:
         texels = np.asarray(self.texels, dtype=np.float32)

@@ -969,9 +969,10 @@ class _SceneReader:
             if p.has("mis_compensation"):
                 if p.boolean("mis_compensation", False):
                     self.notes.append(f"{element.where}: mis_compensation (how Mitsuba samples the map; "
-                                      "tracer samples it by its own distribution: the image is the same)")
+                                      "tracer samples it as --environment-sampling says: the image is "
+                                      "the same)")
             environment = Environment(texels * np.float32(scale), linear, kind="envmap", source=name,
-                                      scale=scale)
+                                      scale=scale, file=str(path))
         p.float("sampling_weight", 1.0, lo=0.0)
         p.done()
         self.environment, self.environment_element = environment, element

@@ -141,7 +141,7 @@ def _read_environment(r: "_Reader", base: Path) -> Environment:
         if problem is not None:
             r.fail(problem, "to_world")
         environment = Environment(texels * np.float32(scale), to_world, kind="envmap", source=file,
-                                  scale=scale)
+                                  scale=scale, file=str(base / file))
     r.done()
     return environment
 

@@ -53,10 +53,15 @@ def write_scene(scene: Scene, path: str | os.PathLike[str], source: str | None =
                        | ({"radiance"} if scene.textures.emitters else set()))
         raise InputError(f"the scene has textures ({', '.join(names)}), which tracer's TOML format does not "
                          "hold yet: render the XML scene itself", str(scene.path))
+    environment_map = None
     if scene.environment is not None and scene.environment.kind != "constant":
-        # Its texels would need an image file beside the TOML; until then, refused, never lost.
-        raise InputError("the scene has an environment map, which tracer convert does not write yet: render "
-                         "the XML scene itself", str(scene.path))
+        # The TOML refers to the map's image file, which must be where the scene found it; a map
+        # of unknown origin would need its texels written beside the TOML: refused, never lost.
+        if not scene.environment.file or not Path(scene.environment.file).is_file():
+            raise InputError("the scene has an environment map whose image file is not known or not "
+                             "there, which tracer convert does not write yet: render the scene itself",
+                             str(scene.path))
+        environment_map = _relative_to(Path(scene.environment.file), Path(path).parent)
     projecting = [image.kind for image in scene.point_images if image is not None]
     if projecting:
         raise InputError(f"the scene has lights that project images ({', '.join(sorted(set(projecting)))}), "
@@ -76,11 +81,19 @@ def write_scene(scene: Scene, path: str | os.PathLike[str], source: str | None =
                 return name
             number += 1
 
-    text, meshes = scene_to_toml(scene, mesh_name, source)
+    text, meshes = scene_to_toml(scene, mesh_name, source, environment_map)
     files = [(target.parent / name, bytes_writer(data)) for name, data in meshes]
     files.append((target, text_writer(text)))
     atomic_write_many(files)
     return [file for file, _ in files]
+
+
+def _relative_to(file: Path, folder: Path) -> str:
+    """``file`` as a TOML in ``folder`` names it: relative where it can be, else absolute."""
+    try:
+        return os.path.relpath(file.resolve(), folder.resolve())
+    except (OSError, ValueError):  # another drive, or a path that cannot be resolved
+        return str(file.resolve())
 
 
 def _inputs(scene: Scene) -> set[Path]:
@@ -114,9 +127,11 @@ def _replaceable(candidate: Path, inputs: set[Path]) -> bool:
     return head.startswith(b"ply\n") and WRITTEN_BY_TRACER + b"\n" in head
 
 
-def scene_to_toml(scene: Scene, mesh_name, source: str | None = None) -> tuple[str, list[tuple[str, bytes]]]:
+def scene_to_toml(scene: Scene, mesh_name, source: str | None = None,
+                  environment_map: str | None = None) -> tuple[str, list[tuple[str, bytes]]]:
     """The TOML text of ``scene`` and its PLY files as ``(file name, bytes)``; ``mesh_name(i)``
-    names the PLY file of shape i (relative to the TOML's folder)."""
+    names the PLY file of shape i (relative to the TOML's folder), ``environment_map`` the image
+    file of its environment map (relative to that folder, or absolute), if it has one."""
     origin = f" from {_one_line(source)}" if source else ""
     lines = [f"# tracer scene written by tracer {__version__}{origin}",
              "# (docs/SCENE_FORMAT.md; every number reads back as the same float64)", ""]
@@ -184,8 +199,15 @@ def scene_to_toml(scene: Scene, mesh_name, source: str | None = None) -> tuple[s
     for direction, irradiance in zip(scene.directional_direction, scene.directional_irradiance, strict=True):
         lines += ["[[lights]]", "type = \"directional\"", f"direction = {_value(direction)}",
                   f"irradiance = {_value(irradiance)}", ""]
-    if scene.environment is not None:  # a constant one (write_scene refuses maps)
-        lines += ["[environment]", f"radiance = {_value(scene.environment.radiance)}", ""]
+    environment = scene.environment
+    if environment is not None and environment.kind == "constant":
+        lines += ["[environment]", f"radiance = {_value(environment.radiance)}", ""]
+    elif environment is not None:
+        if environment_map is None:
+            raise ValueError("a scene with an environment map needs the map's file (environment_map)")
+        rows = ", ".join(_value(row) for row in np.asarray(environment.to_world, dtype=np.float64))
+        lines += ["[environment]", f"map = {_string(environment_map)}",
+                  f"scale = {_value(float(environment.scale))}", f"to_world = [{rows}]", ""]
     return "\n".join(lines), meshes
 
 
