@@ -53,6 +53,7 @@ from __future__ import annotations
 import math
 
 from .. import warp
+from ..frame import add_scaled
 from ..jit import jit
 from ..plugins import register
 from . import microfacet
@@ -62,6 +63,7 @@ from .plastic import MAX_IOR
 
 CODE = 12  # the dispatch code (``tracer.materials``)
 MAX_SAMPLING_RATE = 1e6
+WHITE = (1.0, 1.0, 1.0)
 RATES = ("main_specular_sampling_rate", "clearcoat_sampling_rate", "diffuse_reflectance_sampling_rate")
 
 
@@ -140,11 +142,13 @@ def _principled_fresnel(params, row, base, fresnel: float, wo_h: float):
     dielectric = (1.0 - metallic) * (1.0 - spec_tint) * fresnel
     c = lobes.tint(base)
     r0_tint = lobes.r0_of_eta(eta)
-    out = [0.0, 0.0, 0.0]
-    for k in range(3):
-        out[k] = (dielectric + metallic * lobes.schlick(base[k], wo_h, eta)
-                  + (1.0 - metallic) * spec_tint * lobes.schlick(c[k] * r0_tint, wo_h, eta))
-    return out[0], out[1], out[2]
+    tinted = (1.0 - metallic) * spec_tint
+
+    def channel(k):
+        return (dielectric + metallic * lobes.schlick(base[k], wo_h, eta)
+                + tinted * lobes.schlick(c[k] * r0_tint, wo_h, eta))
+
+    return channel(0), channel(1), channel(2)
 
 
 @jit
@@ -169,7 +173,7 @@ def eval_pdf(params, row, wo, wi):
     microfacet_refraction = not reflects and wo_h > 0.0 and wi_h < 0.0
     p_reflection, p_transmission, p_clearcoat, p_diffuse = _lobe_probabilities(params, row, front, fresnel)
     base = rgb(params, row, BASE_COLOR)
-    f = [0.0, 0.0, 0.0]
+    f = (0.0, 0.0, 0.0)  # a tuple, rebound as lobes add to it: a list would be allocated per call
     pdf = 0.0
     if microfacet_reflection or microfacet_refraction:
         d = microfacet.d_anisotropic(h, alpha_u, alpha_v, microfacet.GGX)
@@ -181,21 +185,15 @@ def eval_pdf(params, row, wo, wi):
             if fresnel > 0.0:
                 common = d * g / (4.0 * cos_o * cos_i)
                 if front:
-                    fp = _principled_fresnel(params, row, base, fresnel, wo_h)
-                    for k in range(3):
-                        f[k] += fp[k] * common
+                    f = add_scaled(f, common, _principled_fresnel(params, row, base, fresnel, wo_h))
                 else:
-                    for k in range(3):
-                        f[k] += bsdf * fresnel * common
+                    f = add_scaled(f, bsdf * fresnel * common, WHITE)
             if front:
                 clearcoat = params[row, CLEARCOAT]
+                gloss = params[row, CLEARCOAT_GLOSS]
                 if clearcoat > 0.0:
-                    gloss = params[row, CLEARCOAT_GLOSS]
-                    value = lobes.clearcoat_value(wo, wi, h, clearcoat, gloss, eta)
-                    for k in range(3):
-                        f[k] += value
-                pdf += (p_clearcoat * lobes.gtr1_d(h, lobes.clearcoat_alpha(params[row, CLEARCOAT_GLOSS]))
-                        * h[2] * jacobian)
+                    f = add_scaled(f, lobes.clearcoat_value(wo, wi, h, clearcoat, gloss, eta), WHITE)
+                pdf += p_clearcoat * lobes.gtr1_d(h, lobes.clearcoat_alpha(gloss)) * h[2] * jacobian
         else:
             denom = wo_h + eta_path * wi_h
             jacobian = eta_path * eta_path * abs(wi_h) / (denom * denom)
@@ -205,23 +203,19 @@ def eval_pdf(params, row, wo, wi):
                 # the Jacobian cancels.
                 value = bsdf * abs((1.0 - fresnel) * d * g * wo_h * wi_h / (cos_o * denom * denom))
                 value /= abs(cos_i)
-                for k in range(3):
-                    f[k] += math.sqrt(base[k]) * value
+                f = add_scaled(f, value, (math.sqrt(base[0]), math.sqrt(base[1]), math.sqrt(base[2])))
     if reflects and front:
         pdf += p_diffuse * warp.cosine_hemisphere_pdf(cos_i)
         if brdf > 0.0:
             roughness = params[row, ROUGHNESS]
             cos_d = wi_h
             shape = lobes.diffuse_shape(cos_o, cos_i, cos_d, roughness, params[row, FLATNESS])
-            for k in range(3):
-                f[k] += brdf * base[k] * warp.INV_PI * shape
+            f = add_scaled(f, brdf * warp.INV_PI * shape, base)
             sheen = params[row, SHEEN]
             if sheen > 0.0 and metallic < 1.0:
-                colour = lobes.sheen_colour(base, params[row, SHEEN_TINT])
                 weight = sheen * (1.0 - metallic) * lobes.schlick_weight(abs(cos_d))
-                for k in range(3):
-                    f[k] += weight * colour[k]
-    return (f[0], f[1], f[2]), pdf
+                f = add_scaled(f, weight, lobes.sheen_colour(base, params[row, SHEEN_TINT]))
+    return f, pdf
 
 
 @jit

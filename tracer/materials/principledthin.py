@@ -35,13 +35,14 @@ specular_transmittance_sampling_rate        ``diffuse_reflectance_sampling_rate`
 from __future__ import annotations
 
 from .. import warp
+from ..frame import add_scaled
 from ..jit import jit
 from ..plugins import register
 from . import microfacet
 from . import principled_lobes as lobes
 from .base import DIFFUSE, GLOSSY, MaterialType, Param, rgb, weighted
 from .plastic import MAX_IOR
-from .principled import MAX_SAMPLING_RATE
+from .principled import MAX_SAMPLING_RATE, WHITE
 
 CODE = 13  # the dispatch code (``tracer.materials``)
 RATES = ("specular_reflectance_sampling_rate", "specular_transmittance_sampling_rate",
@@ -111,7 +112,7 @@ def eval_pdf(params, row, wo, wi):
     h, wo_h, wi_r_h = lobes.half_vector(wo, (wi[0], wi[1], abs(wi[2])), 1.0)
     wi_h = wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2]
     p_reflection, p_transmission, p_diffuse, p_diffuse_transmission = _lobe_probabilities(params, row)
-    f = [0.0, 0.0, 0.0]
+    f = (0.0, 0.0, 0.0)  # a tuple, rebound as lobes add to it: a list would be allocated per call
     pdf = 0.0
     if spec_trans > 0.0 and wo_h > 0.0 and ((reflects and wi_h > 0.0) or (not reflects and wi_h < 0.0)):
         fresnel = microfacet.fresnel_dielectric(wo_h, eta)
@@ -127,34 +128,31 @@ def eval_pdf(params, row, wo, wi):
         if reflects:
             pdf += p_reflection * visible
             spec_tint = params[row, SPEC_TINT]
-            c = lobes.tint(base)
-            r0 = lobes.r0_of_eta(eta)
-            for k in range(3):
-                tinted = lobes.schlick(c[k] * r0, wo_h, eta) if spec_tint > 0.0 else 0.0
-                f[k] += (fresnel * (1.0 - spec_tint) + tinted * spec_tint) * common
+            f = add_scaled(f, fresnel * (1.0 - spec_tint) * common, WHITE)
+            if spec_tint > 0.0:
+                c = lobes.tint(base)
+                r0 = lobes.r0_of_eta(eta)
+                f = add_scaled(f, spec_tint * common, (lobes.schlick(c[0] * r0, wo_h, eta),
+                                                       lobes.schlick(c[1] * r0, wo_h, eta),
+                                                       lobes.schlick(c[2] * r0, wo_h, eta)))
         else:
             pdf += p_transmission * visible
-            for k in range(3):
-                f[k] += base[k] * (1.0 - fresnel) * common
+            f = add_scaled(f, (1.0 - fresnel) * common, base)
     if reflects:
         pdf += p_diffuse * warp.cosine_hemisphere_pdf(cos_i)
         if spec_trans < 1.0 and t < 1.0:
             weight = (1.0 - spec_trans) * (1.0 - t)
             shape = lobes.diffuse_shape(cos_o, cos_i, wi_h, params[row, ROUGHNESS], params[row, FLATNESS])
-            for k in range(3):
-                f[k] += weight * base[k] * warp.INV_PI * shape
+            f = add_scaled(f, weight * warp.INV_PI * shape, base)
             sheen = params[row, SHEEN]
             if sheen > 0.0:
-                colour = lobes.sheen_colour(base, params[row, SHEEN_TINT])
                 s = weight * sheen * lobes.schlick_weight(abs(wi_h))
-                for k in range(3):
-                    f[k] += s * colour[k]
+                f = add_scaled(f, s, lobes.sheen_colour(base, params[row, SHEEN_TINT]))
     else:
         pdf += p_diffuse_transmission * warp.cosine_hemisphere_pdf(-cos_i)
         if spec_trans < 1.0 and t > 0.0:
-            for k in range(3):
-                f[k] += (1.0 - spec_trans) * t * base[k] * warp.INV_PI
-    return (f[0], f[1], f[2]), pdf
+            f = add_scaled(f, (1.0 - spec_trans) * t * warp.INV_PI, base)
+    return f, pdf
 
 
 @jit
