@@ -149,14 +149,14 @@ def diffuse_shape(cos_o: float, cos_i: float, cos_d: float, roughness: float, fl
     2)(1 - F_i / 2) plus retro-reflection R_r (F_o + F_i + F_o F_i (R_r - 1)), R_r = 2 roughness
     cos_d^2, blended toward the fake subsurface 1.25 (F_ss (1 / (cos_o + cos_i) - 1/2) + 1/2) by
     ``flatness``. cos_d: the half vector against the light direction."""
-    f_o, f_i = schlick_weight(cos_i), schlick_weight(cos_o)
-    diffuse = (1.0 - 0.5 * f_i) * (1.0 - 0.5 * f_o)
+    f_view, f_light = schlick_weight(cos_o), schlick_weight(cos_i)
+    diffuse = (1.0 - 0.5 * f_view) * (1.0 - 0.5 * f_light)
     rr = 2.0 * roughness * cos_d * cos_d
-    retro = rr * (f_o + f_i + f_o * f_i * (rr - 1.0))
+    retro = rr * (f_light + f_view + f_light * f_view * (rr - 1.0))
     if flatness == 0.0:
         return diffuse + retro
     fss90 = 0.5 * rr
-    fss = (1.0 + (fss90 - 1.0) * f_o) * (1.0 + (fss90 - 1.0) * f_i)
+    fss = (1.0 + (fss90 - 1.0) * f_light) * (1.0 + (fss90 - 1.0) * f_view)
     subsurface = 1.25 * (fss * (1.0 / (cos_i + cos_o) - 0.5) + 0.5)
     return (diffuse + retro) * (1.0 - flatness) + subsurface * flatness
 
