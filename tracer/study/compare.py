@@ -80,8 +80,8 @@ def product_of_options(names: list[str], *, heuristics: list[str], allocations: 
     every heuristic and allocation, ris with every ``(candidates, sources)`` of ``ris_settings``,
     each strategy that takes light samples with every light sampling, selection and environment
     sampling (those that take none once; None is the default), in that order; a strategy that
-    cannot take an environment sampling (``compensated`` without BSDF samples) is left out of
-    that one, unless it is the only one asked for. Returns them with the heuristic ris
+    cannot take an environment sampling (``compensated`` without BSDF samples) runs the others
+    asked for, and is refused if it can take none of them. Returns them with the heuristic ris
     weights its candidates with: the first classic one given (optimal weights may be negative).
     Raises ``ValueError`` naming the option that cannot be."""
     from ..strategy import CLASSIC_HEURISTICS
@@ -120,14 +120,14 @@ def product_of_options(names: list[str], *, heuristics: list[str], allocations: 
     for name in names:
         for ris in ris_settings if name == "ris" else [None]:
             takes_lights = make(name, ris).light_count > 0
-            offered = [e for e in environments if takes(name, ris, e)] if takes_lights else environments[:1]
-            if not offered and len(environments) > 1:
-                continue  # e.g. light with only compensated asked besides others: nothing it can take
+            # None it can take: the first, which make() refuses with the reason.
+            offered = ([e for e in environments if takes(name, ris, e)] if takes_lights else []) \
+                or environments[:1]
             strategies += [make(name, ris, heuristic, allocation, sampling, selection, environment)
                            for heuristic, allocation in weightings(name)
                            for sampling in (light_samplings if takes_lights else light_samplings[:1])
                            for selection in (light_selections if takes_lights else light_selections[:1])
-                           for environment in (offered or environments[:1])]
+                           for environment in offered]
     return strategies, ris_heuristic
 
 
