@@ -73,11 +73,10 @@ def reference_film(name: str, args):
     return scene, read_exr(path)
 
 
-def tracer_runs(name: str, args) -> list[dict]:
+def tracer_runs(name: str, scene, reference, args) -> list[dict]:
     from tracer.strategy import Strategy
     from tracer.study.compare import independent_seeds
 
-    scene, reference = reference_film(name, args)
     seeds = independent_seeds(reference, None, args.seeds, str(Path(args.out) / "environment_refs"))
     rows = []
     for strategy_name, sampling in RUNS:
@@ -194,10 +193,10 @@ def main() -> int:
                "height": args.height, "spp": args.spp, "time": args.time, "seeds": args.seeds,
                "reference_spp": args.reference_spp, "rows": [], "mitsuba": {}}
     for name in args.scenes.split(","):
-        results["rows"] += tracer_runs(name, args)
+        scene, reference = reference_film(name, args)  # read once: both renderers' runs use it
+        results["rows"] += tracer_runs(name, scene, reference, args)
         if not args.no_mitsuba:
             try:
-                _, reference = reference_film(name, args)
                 results["mitsuba"][name] = mitsuba_run(args.mitsuba_python, name, args, reference)
             except (OSError, RuntimeError) as exc:
                 results["mitsuba"][name] = {"error": str(exc)}
