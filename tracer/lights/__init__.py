@@ -184,7 +184,7 @@ def build_tables(scene, light_selection: str = "power", light_sampling: str = "a
     rectangular quad is one candidate instead of two triangles where the light sampling has a
     technique for rectangles), every emitting analytic sphere and every point light of positive
     intensity, in that order; their techniques follow ``light_sampling``, the environment's
-    ``environment_sampling`` (``tracer.lights.environment.SAMPLINGS``)."""
+    ``environment_sampling`` (``tracer.strategy.ENVIRONMENT_SAMPLINGS``)."""
     selection = plugins.get("light_selection", light_selection)
     chosen = techniques_for(light_sampling)
     tri = emitters.emitting_triangles(scene)

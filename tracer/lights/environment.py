@@ -22,8 +22,9 @@ phi uniform). So the pdf is constant on each cell,
 with no 1 / sin theta at the poles (a pixel-based map sampled uniformly in (u, t) has
 p(w) = p(u, t) / (2 pi^2 sin theta) instead). Luminance is Rec. 709's Y.
 
-**Techniques** (``SAMPLINGS``, a strategy's ``environment_sampling``): the same inversion over
-other cell weights, so every one has an exact pdf and one kernel serves them all:
+**Techniques** (``tracer.strategy.ENVIRONMENT_SAMPLINGS``, a strategy's
+``environment_sampling``): the same inversion over other cell weights, so every one has an exact
+pdf and one kernel serves them all:
 
 - ``luminance`` (the default): the weights above;
 - ``uniform``: weight = the cell's solid angle, so p(w) = 1 / (4 pi) everywhere (the baseline
@@ -53,8 +54,6 @@ from ..jit import jit
 from ..strategy import ENVIRONMENT_SAMPLINGS
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-# The environment's light-sampling techniques (module docstring), the default first.
-SAMPLINGS = ENVIRONMENT_SAMPLINGS
 
 
 class EnvironmentTable(NamedTuple):
@@ -93,9 +92,10 @@ def cell_weights(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def sampling_weights(luminance: np.ndarray, sampling: str = "luminance") -> tuple[np.ndarray, np.ndarray]:
     """``(weight (R, W), solid_angle (R, W))``: the cells' weights under technique ``sampling``
-    (``SAMPLINGS``, module docstring) of a map of luminance ``(H, W)``."""
-    if sampling not in SAMPLINGS:
-        raise ValueError(f"unknown environment sampling {sampling!r}; expected one of {', '.join(SAMPLINGS)}")
+    (``ENVIRONMENT_SAMPLINGS``, module docstring) of a map of luminance ``(H, W)``."""
+    if sampling not in ENVIRONMENT_SAMPLINGS:
+        raise ValueError(f"unknown environment sampling {sampling!r}; expected one of "
+                         f"{', '.join(ENVIRONMENT_SAMPLINGS)}")
     weight, solid_angle = cell_weights(luminance)
     if sampling == "uniform":
         return solid_angle.copy(), solid_angle
@@ -110,7 +110,7 @@ def sampling_weights(luminance: np.ndarray, sampling: str = "luminance") -> tupl
 def table(environment, candidate: int, sampling: str = "luminance") -> EnvironmentTable:
     """The kernels' table of ``environment`` (``tracer.scene.environment.Environment``, or None
     for a table that nothing reads), light candidate ``candidate`` (-1: not sampled), sampled
-    by technique ``sampling`` (``SAMPLINGS``)."""
+    by technique ``sampling`` (``ENVIRONMENT_SAMPLINGS``)."""
     if environment is None:
         return EnvironmentTable(np.zeros((2, 2, 3), dtype=np.float32), np.eye(3), np.eye(3), np.zeros(2),
                                 np.zeros((1, 3)), np.zeros((1, 2)), np.ones(2), -1)
