@@ -18,24 +18,37 @@ LIBLLVM19 = "/usr/lib/x86_64-linux-gnu/libLLVM-19.so"
 
 
 def measure(scene, reference, strategy, seeds: list[int], spp: int, seconds: float, threads: int,
-            row: dict) -> dict:
+            row: dict, masks: dict | None = None) -> dict:
     """``row`` with, for ``strategy`` on ``scene`` against ``reference`` (a Film), each seed's
     ``equal_spp`` (``spp`` samples) and ``equal_time`` (``seconds`` of wall time) run, and their
-    means: ``{kind}_relmse``, ``{kind}_seconds`` and ``{kind}_efficiency`` = 1 / (relMSE x s)."""
+    means: ``{kind}_relmse``, ``{kind}_seconds`` and ``{kind}_efficiency`` = 1 / (relMSE x s);
+    for each of ``masks`` (name -> (pixels,) bool, the pixels of some objects) the same relMSE
+    and efficiency over those pixels alone, ``{kind}_{name}_relmse`` and
+    ``{kind}_{name}_efficiency``."""
+    from tracer.study import metrics
     from tracer.study.compare import Comparison
+
+    masks = masks or {}
+    variance = reference.variance_of_mean()
 
     row.update(equal_spp=[], equal_time=[])
     for seed in seeds:
         comparison = Comparison(scene, reference, seed, threads)
         for kind, run in (("equal_spp", comparison.equal_spp(strategy, spp)),
                           ("equal_time", comparison.equal_time(strategy, seconds))):
-            row[kind].append({"seed": seed, "spp": run.spp, "seconds": run.seconds,
-                              "relmse": run.measures["relmse"]})
+            record = {"seed": seed, "spp": run.spp, "seconds": run.seconds, "relmse": run.measures["relmse"]}
+            for name, mask in masks.items():
+                record[f"relmse_{name}"] = metrics.relmse(run.film.mean[mask], reference.mean[mask],
+                                                          variance[mask])
+            row[kind].append(record)
     for kind in ("equal_spp", "equal_time"):
         rel = sum(r["relmse"] for r in row[kind]) / len(row[kind])
         sec = sum(r["seconds"] for r in row[kind]) / len(row[kind])
         row[f"{kind}_relmse"], row[f"{kind}_seconds"] = rel, sec
         row[f"{kind}_efficiency"] = 1.0 / (rel * sec)
+        for name in masks:
+            rel = sum(r[f"relmse_{name}"] for r in row[kind]) / len(row[kind])
+            row[f"{kind}_{name}_relmse"], row[f"{kind}_{name}_efficiency"] = rel, 1.0 / (rel * sec)
     return row
 
 

@@ -1,5 +1,6 @@
-"""The environment's light-sampling techniques side by side (issue 33): luminance, uniform and
-compensated, under the light and mis strategies, and Mitsuba 3's `direct` at equal time.
+"""The environment's light-sampling techniques side by side (issue 33): luminance, uniform,
+compensated and product, under the light and mis strategies, and Mitsuba 3's `direct` at equal
+time.
 
     python benchmarks/environment_sampling.py [--scenes environment,environment_studio]
                                               [--width 256] [--height 192] [--spp 16] [--time 3]
@@ -12,11 +13,13 @@ sun and an area light; `environment_studio`: a studio of bright panels, the only
 
 - a reference: tracer's `mis` (luminance) at `--reference-spp`, rendered once into
   OUT/environment_refs/NAME.exr (kept, and reused while it matches the scene and size);
-- `light` with luminance and uniform sampling, and `mis` with luminance, uniform and
-  compensated, at equal spp (`--spp`) and at equal wall time (`--time` seconds each): relMSE
-  with the reference's noise subtracted, averaged over `--seeds` seeds the reference does not
-  hold, and efficiency 1 / (relMSE x seconds); each row's efficiency over its strategy's
-  `uniform` row (what issue 33 names) and, for compensated, over luminance;
+- `light` with uniform, luminance and product sampling, and `mis` with uniform, luminance,
+  compensated and product, at equal spp (`--spp`) and at equal wall time (`--time` seconds
+  each): relMSE with the reference's noise subtracted, averaged over `--seeds` seeds the
+  reference does not hold, and efficiency 1 / (relMSE x seconds); each row's efficiency over its
+  strategy's `uniform` row (what issue 33 names) and over luminance; the same over the pixels
+  of the glossy objects (`roughconductor`) and of the diffuse ones (`diffuse`) alone, where a
+  camera ray through the pixel's centre first meets such an object;
 - Mitsuba 3's `direct` (one emitter and one BSDF sample, the power heuristic, its envmap's own
   hierarchical sampling; `llvm_ad_rgb` with all its threads) at about `--time` seconds: its
   relMSE against the same reference and its efficiency, which tracer's `mis` rows are divided
@@ -49,8 +52,32 @@ ROOT = HERE.parent
 SCENES = ROOT / "tracer" / "scenes" / "mitsuba"
 DEFAULT_MITSUBA_PYTHON = "/work/venv-xcheck/bin/python"
 # (strategy, environment sampling): every run of a scene, the baseline of each strategy first.
-RUNS = [("light", "uniform"), ("light", "luminance"), ("mis", "uniform"), ("mis", "luminance"),
-        ("mis", "compensated")]
+RUNS = [("light", "uniform"), ("light", "luminance"), ("light", "product"), ("mis", "uniform"),
+        ("mis", "luminance"), ("mis", "compensated"), ("mis", "product")]
+# The objects whose pixels are measured apart: name -> material types.
+OBJECTS = {"glossy": ("roughconductor",), "diffuse": ("diffuse",)}
+
+
+def object_masks(scene) -> dict:
+    """Name of ``OBJECTS`` -> (pixels,) bool, the pixels whose centre's camera ray first meets an
+    object of those material types."""
+    import numpy as np
+
+    from tracer.geometry import SceneRays
+    from tracer.plugins import by_code
+
+    camera = scene.camera
+    count = camera.width * camera.height
+    origins, dirs = camera.rays(np.arange(count), np.full((count, 2), 0.5))
+    prim = SceneRays(scene).first_hit(origins.astype(np.float32), dirs.astype(np.float32))
+    row = np.full(count, -1)
+    triangle = (prim >= 0) & (prim < scene.triangle_count)
+    row[triangle] = scene.material[prim[triangle]]
+    sphere = prim >= scene.triangle_count
+    row[sphere] = scene.sphere_material[prim[sphere] - scene.triangle_count]
+    types = by_code("material")
+    names = np.array([types[int(k)].name if int(k) in types else "" for k in scene.materials.kind] + [""])
+    return {name: np.isin(names[row], kinds) for name, kinds in OBJECTS.items()}
 
 
 def reference_film(name: str, args):
@@ -79,10 +106,11 @@ def tracer_runs(name: str, scene, reference, args) -> list[dict]:
 
     seeds = independent_seeds(reference, None, args.seeds, str(Path(args.out) / "environment_refs"))
     rows = []
+    masks = object_masks(scene)
     for strategy_name, sampling in RUNS:
         row = measure(scene, reference, Strategy(strategy_name, environment_sampling=sampling), seeds,
                       args.spp, args.time, args.threads,
-                      {"scene": name, "strategy": strategy_name, "environment_sampling": sampling})
+                      {"scene": name, "strategy": strategy_name, "environment_sampling": sampling}, masks)
         print(f"  {name} {strategy_name} {sampling}: equal spp relMSE {row['equal_spp_relmse']:.4g}, "
               f"equal time relMSE {row['equal_time_relmse']:.4g} ({row['equal_time_seconds']:.2f} s)",
               file=sys.stderr)
@@ -93,6 +121,9 @@ def tracer_runs(name: str, scene, reference, args) -> list[dict]:
             for base in ("uniform", "luminance"):
                 row[f"{kind}_vs_{base}"] = (row[f"{kind}_efficiency"]
                                             / by_run[row["strategy"], base][f"{kind}_efficiency"])
+                for part in masks:
+                    row[f"{kind}_{part}_vs_{base}"] = (row[f"{kind}_{part}_efficiency"]
+                                                       / by_run[row["strategy"], base][f"{kind}_{part}_efficiency"])
     return rows
 
 
@@ -150,8 +181,10 @@ def markdown(results: dict) -> str:
              "| scene | strategy | environment sampling | relMSE (equal spp) | relMSE (equal time) "
              "| spp in time "
              "| efficiency vs uniform (equal spp) | (equal time) | vs luminance (equal time) "
+             "| glossy objects vs luminance (equal spp) | (equal time) "
+             "| diffuse objects vs luminance (equal spp) | (equal time) "
              "| vs Mitsuba 3 (equal time) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results["rows"]:
         spp_in_time = sum(x["spp"] for x in r["equal_time"]) / len(r["equal_time"])
         mitsuba = results.get("mitsuba", {}).get(r["scene"], {})
@@ -160,7 +193,10 @@ def markdown(results: dict) -> str:
         lines.append(f"| {r['scene']} | {r['strategy']} | {r['environment_sampling']} | "
                      f"{r['equal_spp_relmse']:.4g} | {r['equal_time_relmse']:.4g} | {spp_in_time:.0f} | "
                      f"{r['equal_spp_vs_uniform']:.2f} | {r['equal_time_vs_uniform']:.2f} | "
-                     f"{r['equal_time_vs_luminance']:.2f} | {versus} |")
+                     f"{r['equal_time_vs_luminance']:.2f} | "
+                     + "".join(f"{r.get(f'{kind}_{part}_vs_luminance', float('nan')):.2f} | "
+                               for part in OBJECTS for kind in ("equal_spp", "equal_time"))
+                     + f"{versus} |")
     for name, m in results.get("mitsuba", {}).items():
         if "error" in m:
             lines += ["", f"Mitsuba on {name}: {m['error']}"]

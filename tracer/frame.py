@@ -51,6 +51,14 @@ def basis(n):
 
 
 @jit
+def rotate(m, v):
+    """``m v`` for a (3, 3) array ``m`` (a rotation between frames, rows the new axes)."""
+    return (m[0, 0] * v[0] + m[0, 1] * v[1] + m[0, 2] * v[2],
+            m[1, 0] * v[0] + m[1, 1] * v[1] + m[1, 2] * v[2],
+            m[2, 0] * v[0] + m[2, 1] * v[1] + m[2, 2] * v[2])
+
+
+@jit
 def to_local(s, t, n, w):
     """World ``w`` in the frame (s, t, n)."""
     return (dot(w, s), dot(w, t), dot(w, n))

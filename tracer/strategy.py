@@ -42,11 +42,13 @@ DEFAULT_RIS_CANDIDATES = 16
 DEFAULT_LIGHT_SAMPLING = "area"
 DEFAULT_LIGHT_SELECTION = "power"
 # How the environment is light-sampled (``tracer.lights.environment``), the default first.
-ENVIRONMENT_SAMPLINGS = ("luminance", "uniform", "compensated")
+ENVIRONMENT_SAMPLINGS = ("luminance", "uniform", "compensated", "product")
 ENVIRONMENT_SAMPLING_DOCS = {
     "luminance": "cells in proportion to luminance x solid angle (2-D inversion of the map)",
     "uniform": "uniform on the sphere of directions, p = 1 / (4 pi)",
     "compensated": "luminance less the map's mean, clamped at 0 (Karlik et al. 2019); needs BSDF samples",
+    "product": "luminance x the shading point's BSDF lobe, by a hierarchy of blocks (after Clarberg and "
+               "Akenine-Moller 2008)",
 }
 DEFAULT_HEURISTIC = "power"
 

@@ -123,7 +123,9 @@ class DirectLighting:
                               sampler, strategy.direction_technique if strategy.direction_count else None,
                               self.combiner.name, bool(strategy.light_count), bool(strategy.direction_count),
                               strategy.learns, textures=self.scene.textures.shading,
-                              environment=self.scene.environment is not None)
+                              environment=self.scene.environment is not None,
+                              environment_product=self.lights.tables.environment.candidate >= 0
+                              and strategy.environment_sampling == "product" and bool(strategy.light_count))
         return features.widened() if shared_builds() else features
 
     def build(self, sampler: samplers.SamplerParams) -> Build:

@@ -84,6 +84,9 @@ class RayBuffer(NamedTuple):
     lane : (c,) camera lane the sample belongs to.   delta : (c,) a delta sample (weight 1).
     other : (c,) the (expected) light sample count of the shading point: the MIS weights of
         direction samples scale the light pdf by it.
+    env_pdf : (c,) the environment's product-sampling pdf of the direction at its shading point
+        (direction rays only, written only under product sampling: ``tracer.lights.
+        environment_product``, whose pdf needs the point's material, which the ray does not carry).
     control, v2, t : (c,) what an unblocked light sample adds to ``tracer.tuning``'s statistics
         (its term of C, the mean square of its balance value over channels, p_l / (p_l + p_b));
         written only when the estimator learns.
@@ -103,6 +106,7 @@ class RayBuffer(NamedTuple):
     control: np.ndarray
     v2: np.ndarray
     t: np.ndarray
+    env_pdf: np.ndarray
 
     @classmethod
     def empty(cls, count: int) -> "RayBuffer":
@@ -111,7 +115,7 @@ class RayBuffer(NamedTuple):
                    np.empty(count, dtype=f32), np.empty((count, 3)), np.empty((count, 3)),
                    np.empty((count, 3)), np.empty((count, 3)), np.empty(count),
                    np.empty(count, dtype=np.int64), np.empty(count, dtype=np.bool_),
-                   np.empty(count), np.empty(count), np.empty(count), np.empty(count))
+                   np.empty(count), np.empty(count), np.empty(count), np.empty(count), np.empty(count))
 
 
 class Reservoirs(NamedTuple):

@@ -65,7 +65,7 @@ def direction_value(hit_table, first_sphere: int, textures, light_tables, heuris
     (the emitter's back side). ``textures`` give a textured emitter's radiance at the point
     hit (``lookup.emitted``). ``rays`` is a tuple of the direction buffer's arrays, unpacked
     by the caller before its loop."""
-    dirs, values, points, normals, shadings, origins, pdfs, deltas, others = rays
+    dirs, values, points, normals, shadings, origins, pdfs, deltas, others, _ = rays
     wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
     x = (points[row, 0], points[row, 1], points[row, 2])
     y = x  # the emitter's point (a sphere's is found here; a triangle's only if textured)
@@ -109,8 +109,9 @@ def _carried(values, row: int, le, w: float):
 def environment_value(light_tables, heuristic: int, rays, row: int):
     """What direction sample ``row``, whose ray escapes the scene, adds from the environment:
     ``(value, raw, pdf_light)`` as :func:`direction_value` (the environment is never seen from
-    behind; its pdf is ``lights.pdf_environment``)."""
-    dirs, values, points, normals, shadings, origins, pdfs, deltas, others = rays
+    behind; its pdf is ``lights.pdf_environment``, from the row's ``env_pdf`` under product
+    sampling)."""
+    dirs, values, points, normals, shadings, origins, pdfs, deltas, others, env_pdfs = rays
     wi = (float(dirs[row, 0]), float(dirs[row, 1]), float(dirs[row, 2]))
     le = environment_light.radiance(light_tables.environment, wi)
     w = 1.0
@@ -119,7 +120,7 @@ def environment_value(light_tables, heuristic: int, rays, row: int):
     if other > 0.0 and not deltas[row]:
         x = (points[row, 0], points[row, 1], points[row, 2])
         receiver = (shadings[row, 0], shadings[row, 1], shadings[row, 2])
-        pdf_light = lights.pdf_environment(light_tables, x, receiver, wi)
+        pdf_light = lights.pdf_environment(light_tables, x, receiver, wi, env_pdfs[row])
         w = dispatch.weight(heuristic, pdfs[row], other * pdf_light)
     value, raw = _carried(values, row, le, w)
     return value, raw, pdf_light
@@ -129,7 +130,7 @@ def environment_value(light_tables, heuristic: int, rays, row: int):
 def direction_arrays(direction):
     """The direction buffer's arrays that :func:`direction_value` reads, as one plain tuple."""
     return (direction.dir, direction.value, direction.point, direction.normal, direction.shading,
-            direction.origin, direction.pdf, direction.delta, direction.other)
+            direction.origin, direction.pdf, direction.delta, direction.other, direction.env_pdf)
 
 
 dispatch = UNBOUND  # bound per build (``tracer.kernels``)

@@ -26,11 +26,12 @@ import math
 import numpy as np
 
 from .. import lights, mis, tuning
-from ..frame import add_scaled, normalized, scale, sub
+from ..frame import add_scaled, normalized, scale, sub, to_world
 from ..geometry import offset_origin
 from ..jit import jit
 from ..kernels import UNBOUND, kernel
 from ..lights import environment as environment_light
+from ..lights import environment_product
 from ..materials.base import MAX_MATERIAL_ROWS
 from ..samplers import dimensions
 from ..textures import FRAME, PERTURB_KIND, lookup, shading_frames
@@ -39,7 +40,7 @@ from .combiners import ris
 from .direction_samples import direction_arrays, direction_sample, direction_value, environment_value
 
 # Bound per build (``tracer.kernels.dispatch``): what the render takes and does.
-LIGHT_SAMPLES = DIRECTION_SAMPLES = LEARNS = RESAMPLES = TEXTURES = ENVIRONMENT = TRANSMITS = False
+LIGHT_SAMPLES = DIRECTION_SAMPLES = LEARNS = RESAMPLES = TEXTURES = ENVIRONMENT = TRANSMITS = PRODUCT = False
 
 
 @kernel
@@ -67,7 +68,7 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
     dir_origin, dir_dir, dir_value, dir_lane = (direction.origin, direction.dir, direction.value,
                                                 direction.lane)
     dir_point, dir_normal, dir_shading = direction.point, direction.normal, direction.shading
-    dir_pdf, dir_delta, dir_other = direction.pdf, direction.delta, direction.other
+    dir_pdf, dir_delta, dir_other, dir_env_pdf = direction.pdf, direction.delta, direction.other, direction.env_pdf
     # Lane statistics exist only where a pass gathers them (optimal MIS in every pass, adaptive
     # allocation while it still learns): an empty array otherwise, never written.
     learning = LEARNS and len(lane_stats) > 0
@@ -142,13 +143,20 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
         if counting:
             lane_stats[lane, tuning.LIGHT_TAKEN] = lights_here
             lane_stats[lane, tuning.DIRECTION_TAKEN] = dirs_here
+        # Product sampling of the environment: the shading point's lobe proxy in the map's frame,
+        # for its light samples and the pdf of its direction samples (``environment_product``).
+        lobe = lights.NO_LOBE
+        if PRODUCT:
+            mirror = to_world(s, t, normal, (-wo[0], -wo[1], wo[2]))
+            lobe = environment_product.lobe_in_map(environment.to_map,
+                                                   dispatch.material_lobe(kind, here, material, wo), normal, mirror)
 
         # Emitter sampling: f Le |cos| w_l / (n̄_l p_l), a shadow ray toward the light point.
         if LIGHT_SAMPLES:
             for j in range(lights_here):
                 wi_world, dist, value, raw, w_balance, share_t = light_samples.light_sample(
                     j, sampler, state, selection, technique, light_rows, environment, here, plan, point,
-                    surface, (own_light, own_dir), emitting)
+                    surface, (own_light, own_dir), emitting, lobe)
                 if TEXTURES and tilted:
                     bend = shading_frames.factor(unperturbed, normal, a2, wi_world)
                     value, raw = scale(bend, value), scale(bend, raw)
@@ -193,6 +201,8 @@ def shade(hits, sampler, surfaces, light_tables, plan, tuned, out):
                 dir_pdf[n_direction] = own_dir * pdf_dir
                 dir_delta[n_direction] = delta
                 dir_other[n_direction] = own_light
+                if PRODUCT and own_light > 0.0 and not delta:
+                    dir_env_pdf[n_direction] = environment_light.pdf_product(environment, lobe, wi_world)
                 if counting:
                     lane_stats[lane, tuning.DIRECTION_RAYS] += 1.0
                 for axis in range(3):

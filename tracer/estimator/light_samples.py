@@ -25,7 +25,7 @@ LEARNS = DIRECTION_SAMPLES = TRANSMITS = TEXTURES = False  # bound per build (``
 
 @template
 def light_sample(j: int, sampler, state, selection, technique, rows, environment, params, plan, point,
-                 surface, own, emitting):
+                 surface, own, emitting, lobe):
     """Light sample ``j`` of the shading point ``point = (x, geometric, normal, s, t, wo)`` of
     material ``surface = (kind, row, receiver, through)`` (receiver: the normal bounding which
     lights reach it, 0 for a type that transmits, ``through``), taken with expected counts
@@ -39,7 +39,8 @@ def light_sample(j: int, sampler, state, selection, technique, rows, environment
     value : RGB it adds if unblocked (weighted).   raw : the same before the MIS weight (what
     the learning looks at).   w_balance, share_t : its balance weight and p_l / (p_l + p_d), for
     the learning (``tracer.tuning``; 1 unless the build learns).   dist : to the light point
-    (inf for the environment); 0 with a zero value where the sample is invalid."""
+    (inf for the environment); 0 with a zero value where the sample is invalid. ``lobe``: the
+    shading point's lobe proxy for product sampling of the environment (``lights.sample_with``)."""
     x, geometric, normal, s, t, wo = point
     kind, material, receiver, through = surface
     own_light, own_dir = own
@@ -48,7 +49,7 @@ def light_sample(j: int, sampler, state, selection, technique, rows, environment
     wi_world, dist, le, pdf_light, delta, k = lights.sample_with(
         selection, technique, rows, environment, x, geometric, receiver,
         dispatch.uniform(sampler, state, dimensions.light_choice(j)),
-        u[0], u[1])
+        u[0], u[1], lobe)
     if not pdf_light > 0.0:
         return wi_world, 0.0, zero, zero, 1.0, 1.0
     if TEXTURES:

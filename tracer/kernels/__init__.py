@@ -41,6 +41,9 @@ class FeatureSet:
     textures : some material parameter of the scene is textured (``tracer.textures``).
     environment : the scene has an environment light (``tracer.lights.environment``): rays
         that escape see it, and it may be light-sampled.
+    environment_product : light samples of the environment are drawn by product sampling
+        (``tracer.lights.environment_product``): the shading point's lobe proxy is computed, and
+        direction samples carry the environment's pdf of their direction.
     shared : a build that renders of many scenes share (``widened``): every material and
         technique, each called rather than inlined, so that all such builds link one compiled
         copy of each instead of compiling them into every kernel.
@@ -58,6 +61,7 @@ class FeatureSet:
     shared: bool = False
     textures: bool = False
     environment: bool = False
+    environment_product: bool = False
 
     @property
     def key(self) -> str:
@@ -83,6 +87,7 @@ class FeatureSet:
                 "LEARNS": self.learns, "RESAMPLES": plugins.get("combiner", self.combiner).resamples,
                 "PER_POINT_SELECTION": bool(getattr(selection, "per_point", False)),
                 "TEXTURES": self.textures, "ENVIRONMENT": self.environment,
+                "PRODUCT": self.environment_product,
                 "TRANSMITS": any(getattr(plugins.get("material", m), "transmits", False)
                                  for m in self.materials)}
 
@@ -95,7 +100,7 @@ class FeatureSet:
         defaults = {"materials": (), "light_techniques": (), "light_selection": "power",
                     "sampler": "independent", "direction": None, "combiner": "sum", "light_samples": False,
                     "direction_samples": False, "learns": False, "textures": False,
-                    "environment": False}
+                    "environment": False, "environment_product": False}
         unknown = set(fields) - set(defaults)
         if unknown:
             raise ValueError(f"no feature-set field {sorted(unknown)[0]!r} to ignore")
@@ -114,7 +119,8 @@ class FeatureSet:
 
     def describe(self) -> str:
         """One line of what is compiled: ``diffuse, roughconductor; triangle_area; power; ...``."""
-        lights = self.light_techniques + (("environment",) if self.environment else ())
+        environment = "environment by product" if self.environment_product else "environment"
+        lights = self.light_techniques + ((environment,) if self.environment else ())
         parts = [", ".join(self.materials) or "no materials", ", ".join(lights) or "no lights",
                  f"{self.light_selection} selection", f"{self.sampler} sampler",
                  f"{self.combiner}" + (f" with {self.direction} directions" if self.direction else "")]

@@ -10,6 +10,9 @@ wo, wi)``, ``material_sample(kind,         ``if kind == CODE`` branches over the
 params, row, wo, u_lobe, u0, u1)``         only (``tracer.materials``), black for any other code
 ``part_eval_pdf``, ``part_sample``         the same chains over the non-composite types: a blend's parts
                                            (``tracer.materials.blendbsdf``)
+``material_lobe(kind, params, row, wo)``   (kd, ks, ku, alpha): the type's lobe proxy for product sampling
+                                           of the environment (``tracer.lights.environment_product``),
+                                           uniform for a type without one
 ``technique_sample(code, rows, k, x, n,    (wi, dist, le, pdf, delta) and the pdf of the light technique of
 u0, u1)``, ``technique_pdf(code, rows,     ``code``: a generated chain over the techniques the scene's
 k, x, n, wi, dist)``                       emitters use (``tracer.lights.techniques``)
@@ -23,7 +26,8 @@ Flags (plain booleans, also bound as globals of every built template, where numb
 branches they turn off before it compiles them): ``LIGHT_SAMPLES`` and ``DIRECTION_SAMPLES``
 (the strategy takes any), ``LEARNS`` (a strategy that learns between passes: the kernels
 gather ``tracer.tuning``'s statistics), ``RESAMPLES`` (``ris``: light candidates go to a
-reservoir), ``PER_POINT_SELECTION`` (the selection's pmf depends on the shading point).
+reservoir), ``PER_POINT_SELECTION`` (the selection's pmf depends on the shading point),
+``PRODUCT`` (the environment is light-sampled by product: ``tracer.lights.environment_product``).
 
 The chains are generated as source text, compiled with a file name that says what they are
 (``<tracer dispatch …>``, registered in ``linecache`` so tracebacks show them) and inlined into
@@ -72,8 +76,9 @@ def fill(build: Build, features) -> None:
                 _bind(build, built, name, getattr(module, name))
             setattr(namespace, f"_material_{m.code}", built)
             continue
-        setattr(namespace, f"_material_{m.code}", _called(_checked(m), ("eval_pdf", "sample"))
-                if features.shared else _checked(m))
+        module = _checked(m)
+        setattr(namespace, f"_material_{m.code}", _called(module, ("eval_pdf", "sample") + _lobe_of(module))
+                if features.shared else module)
     # The parts of a composite material (a blend's two) are of the other types: chains over those.
     for chain, over in (("material", materials), ("part", [m for m in materials if not m.composite])):
         source.append(_chain(f"{chain}_eval_pdf", "kind, params, row, wo, wi", "kind",
@@ -82,6 +87,13 @@ def fill(build: Build, features) -> None:
         source.append(_chain(f"{chain}_sample", "kind, params, row, wo, u_lobe, u0, u1", "kind",
                              [(m.code, f"_material_{m.code}.sample(params, row, wo, u_lobe, u0, u1)")
                               for m in over], "(0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0"))
+
+    # The lobe proxies of product sampling (``tracer.lights.environment_product``), where a type
+    # has one; any other type (a blend too) is sampled by the map alone.
+    source.append(_chain("material_lobe", "kind, params, row, wo", "kind",
+                         [(m.code, f"_material_{m.code}.lobe(params, row, wo)") for m in materials
+                          if not m.composite and _lobe_of(m.functions())],
+                         "(0.0, 0.0, 1.0, 1.0)"))
 
     techniques = [plugins.get("light_technique", name) for name in features.light_techniques]
     for t in techniques:
@@ -98,8 +110,8 @@ def fill(build: Build, features) -> None:
     text = "".join(source)
     linecache.cache[filename] = (len(text), None, text.splitlines(True), filename)
     exec(compile(text, filename, "exec"), namespace.__dict__)
-    for name in ("material_eval_pdf", "material_sample", "part_eval_pdf", "part_sample", "technique_sample",
-                 "technique_pdf"):
+    for name in ("material_eval_pdf", "material_sample", "part_eval_pdf", "part_sample", "material_lobe",
+                 "technique_sample", "technique_pdf"):
         setattr(namespace, name, jit_module.jit_generated(getattr(namespace, name)))
     namespace.source = text
 
@@ -123,6 +135,11 @@ def fill(build: Build, features) -> None:
     combiner = _checked(plugins.get("combiner", features.combiner))
     for name in ("counts", "weight"):
         _bind(build, namespace, name, getattr(combiner, name))
+
+
+def _lobe_of(module: types.ModuleType) -> tuple[str, ...]:
+    """``("lobe",)`` if a material's module has a lobe proxy for product sampling, else ()."""
+    return ("lobe",) if callable(getattr(module, "lobe", None)) else ()
 
 
 _CALLED: dict[str, types.ModuleType] = {}

@@ -35,7 +35,10 @@ pdf and one kernel serves them all:
   mean are never light-sampled, which leaves them to BSDF sampling: the estimate stays unbiased
   only where MIS with BSDF samples covers them, so a strategy without BSDF samples cannot take
   it (``tracer.strategy``). A map with no cell above its mean (a constant one) keeps the
-  ``luminance`` weights, as pbrt-v4 falls back.
+  ``luminance`` weights, as pbrt-v4 falls back;
+- ``product``: the luminance cells, chosen through a hierarchy of blocks weighted by the shading
+  point's BSDF lobe (``tracer.lights.environment_product``: :func:`sample_product`,
+  :func:`pdf_product`), so the pdf depends on the shading point and its material.
 
 The environment is one light candidate, the last (``tracer.lights.emitters``), whose flux for
 the ``power`` selection is pi r^2 times the integral of its mean radiance over the sphere, r
@@ -50,8 +53,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..frame import rotate
 from ..jit import jit
 from ..strategy import ENVIRONMENT_SAMPLINGS
+from . import environment_product as product_sampling
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -64,7 +69,8 @@ class EnvironmentTable(NamedTuple):
     R = H - 1 rows of cells.   column_cdf : (R, W + 1) float64 the CDF within each row.
     cell_pdf : (R, W) float64 the solid-angle pdf on each cell, P(cell) / Omega(cell).
     cos_edge : (R + 1,) cos theta at the rows' edges.   candidate : the environment's light
-    candidate (-1: none, it is not light-sampled).
+    candidate (-1: none, it is not light-sampled).   product : the blocks of ``product``
+    sampling (``environment_product.ProductTable``; a one-block table for other samplings).
     """
 
     texels: np.ndarray
@@ -75,6 +81,7 @@ class EnvironmentTable(NamedTuple):
     cell_pdf: np.ndarray
     cos_edge: np.ndarray
     candidate: int
+    product: product_sampling.ProductTable
 
 
 def cell_weights(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -113,21 +120,23 @@ def table(environment, candidate: int, sampling: str = "luminance") -> Environme
     by technique ``sampling`` (``ENVIRONMENT_SAMPLINGS``)."""
     if environment is None:
         return EnvironmentTable(np.zeros((2, 2, 3), dtype=np.float32), np.eye(3), np.eye(3), np.zeros(2),
-                                np.zeros((1, 3)), np.zeros((1, 2)), np.ones(2), -1)
+                                np.zeros((1, 3)), np.zeros((1, 2)), np.ones(2), -1, product_sampling.empty())
     texels = environment.texels
     height, width = texels.shape[:2]
     weight, solid_angle = sampling_weights(texels.astype(np.float64) @ LUMINANCE, sampling)
     row_weight = weight.sum(axis=1)
     total = row_weight.sum()
-    row_cdf = _cdf(row_weight)
+    row_cdf = running_cdf(row_weight)
     column_cdf = np.empty((height - 1, width + 1))
     for r in range(height - 1):
-        column_cdf[r] = _cdf(weight[r])
+        column_cdf[r] = running_cdf(weight[r])
     cell_pdf = weight / total / solid_angle if total > 0.0 else np.zeros_like(weight)
     cos_edge = _cos_edges(height)
     to_world = np.ascontiguousarray(environment.to_world, dtype=np.float64)
+    blocks = (product_sampling.table(cell_pdf * solid_angle, cos_edge) if sampling == "product"
+              else product_sampling.empty())
     return EnvironmentTable(np.ascontiguousarray(texels, dtype=np.float32), np.ascontiguousarray(to_world.T),
-                            to_world, row_cdf, column_cdf, cell_pdf, cos_edge, int(candidate))
+                            to_world, row_cdf, column_cdf, cell_pdf, cos_edge, int(candidate), blocks)
 
 
 def power_integral(environment) -> float:
@@ -147,7 +156,7 @@ def _cos_edges(height: int) -> np.ndarray:
     return np.cos(np.pi * np.arange(height) / (height - 1))
 
 
-def _cdf(weight: np.ndarray) -> np.ndarray:
+def running_cdf(weight: np.ndarray) -> np.ndarray:
     """(n + 1,) the normalized running sum of ``weight (n,)`` from 0; uniform if it sums to 0
     (a row that is never chosen still gets a valid CDF)."""
     total = weight.sum()
@@ -177,16 +186,9 @@ def _invert(cdf, u: float):
 
 
 @jit
-def _rotate(m, v):
-    return (m[0, 0] * v[0] + m[0, 1] * v[1] + m[0, 2] * v[2],
-            m[1, 0] * v[0] + m[1, 1] * v[1] + m[1, 2] * v[2],
-            m[2, 0] * v[0] + m[2, 1] * v[1] + m[2, 2] * v[2])
-
-
-@jit
 def map_coordinates(env, wi):
     """``(u, t)`` of the world unit direction ``wi`` in the map: u in [0, 1), t in [0, 1]."""
-    v = _rotate(env.to_map, wi)
+    v = rotate(env.to_map, wi)
     u = math.atan2(v[0], -v[2]) * (0.5 / math.pi)
     u -= math.floor(u)
     return u, math.acos(min(max(v[1], -1.0), 1.0)) / math.pi
@@ -246,7 +248,7 @@ def direction_in_cell(env, r: int, c: int, a: float, b: float):
     phi = 2.0 * math.pi * (c + 0.5 + b) / width
     # Mitsuba's uv_to_direction: u = phi / 2 pi, (sin phi sin theta, cos theta, -cos phi sin theta).
     local = (math.sin(phi) * sin_theta, cos_theta, -math.cos(phi) * sin_theta)
-    return _rotate(env.to_world, local)
+    return rotate(env.to_world, local)
 
 
 @jit
@@ -260,3 +262,41 @@ def sample(env, u0: float, u1: float):
     if not p > 0.0:
         return wi, (0.0, 0.0, 0.0), 0.0
     return wi, radiance(env, wi), p
+
+
+@jit
+def sample_product(env, lobe, u0: float, u1: float):
+    """:func:`sample` by ``product`` sampling for the shading point whose lobe proxy (in the
+    map's frame) is ``lobe`` (``environment_product.lobe_in_map``): ``(wi, le, pdf)``. u0 walks
+    the blocks and then places the direction within its cell in theta; u1 picks the cell within
+    the block and places it in phi."""
+    blocks = env.product
+    i, j, p_tree, a = product_sampling.descend(blocks, lobe, u0)
+    b = (i * (len(blocks.column_edge) - 1) + j)
+    start = blocks.cdf_start[b]
+    r0, c0 = blocks.row_edge[i], blocks.column_edge[j]
+    columns = blocks.column_edge[j + 1] - c0
+    cells = (blocks.row_edge[i + 1] - r0) * columns
+    k, rest = _invert(blocks.cell_cdf[start:start + cells + 1], u1)
+    r, c = r0 + k // columns, c0 + k % columns
+    wi = direction_in_cell(env, r, c, a, rest)
+    finest = blocks.level_start[len(blocks.level_start) - 2] + b
+    p = p_tree * env.cell_pdf[r, c] / blocks.block[finest, product_sampling.ENERGY]
+    if not p > 0.0:
+        return wi, (0.0, 0.0, 0.0), 0.0
+    return wi, radiance(env, wi), p
+
+
+@jit
+def pdf_product(env, lobe, wi) -> float:
+    """Solid-angle pdf with which :func:`sample_product` picks the world unit direction ``wi``
+    for the same ``lobe``: p_lum(wi) P_tree(block) / E_block (``environment_product``)."""
+    r, c = cell_of(env, wi)
+    p_cell = env.cell_pdf[r, c]
+    if not p_cell > 0.0:
+        return 0.0
+    blocks = env.product
+    i, j = blocks.row_block[r], blocks.column_block[c]
+    finest = blocks.level_start[len(blocks.level_start) - 2] + i * (len(blocks.column_edge) - 1) + j
+    return (product_sampling.tree_probability(blocks, lobe, i, j) * p_cell
+            / blocks.block[finest, product_sampling.ENERGY])

@@ -209,6 +209,13 @@ def rgb(params, row: int, column: int):
 
 
 @jit
+def mean3(params, row: int, column: int) -> float:
+    """The mean of the three columns ``column .. column + 2`` of material ``row`` (a colour's
+    weight in a lobe proxy: ``lobe``)."""
+    return (params[row, column] + params[row, column + 1] + params[row, column + 2]) / 3.0
+
+
+@jit
 def weighted(wi, f, pdf: float, lobe: int):
     """A ``sample`` result ``(wi, weight, pdf, lobe)`` for a direction drawn with density
     ``pdf`` whose f is ``f``: weight = f |cos(theta_i)| / pdf (wi below the surface: a

@@ -12,7 +12,7 @@ from __future__ import annotations
 from .. import warp
 from ..jit import jit
 from ..plugins import register
-from .base import DIFFUSE, MaterialType, Param, rgb
+from .base import DIFFUSE, MaterialType, Param, mean3, rgb
 
 CODE = 1  # the dispatch code (``tracer.materials``)
 TYPE = register(MaterialType(module=__name__, rank=CODE, name="diffuse", code=CODE, lobes=DIFFUSE,
@@ -39,3 +39,10 @@ def sample(params, row, wo, u_lobe, u0, u1):
     if not p > 0.0:
         return wi, (0.0, 0.0, 0.0), 0.0, 0
     return wi, rgb(params, row, REFLECTANCE), p, DIFFUSE
+
+
+@jit
+def lobe(params, row, wo):
+    """The lobe proxy of product sampling (``tracer.lights.environment_product``): diffuse,
+    weighted by the mean reflectance."""
+    return mean3(params, row, REFLECTANCE), 0.0, 0.0, 1.0

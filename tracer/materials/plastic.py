@@ -128,3 +128,10 @@ def sample(params, row, wo, u_lobe, u0, u1):
         return wi, (0.0, 0.0, 0.0), 0.0, 0
     c = wi[2] / p
     return wi, (f[0] * c, f[1] * c, f[2] * c), p, DIFFUSE
+
+
+@jit
+def lobe(params, row, wo):
+    """The lobe proxy of product sampling (``tracer.lights.environment_product``): the diffuse
+    base alone (the smooth coating's delta lobe takes no light samples)."""
+    return 1.0, 0.0, 0.0, 1.0

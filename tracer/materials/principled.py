@@ -273,3 +273,18 @@ def sample(params, row, wo, u_lobe, u0, u1):
             return nothing
     f, pdf = eval_pdf(params, row, wo, wi)
     return weighted(wi, f, pdf, lobe)
+
+
+@jit
+def lobe(params, row, wo):
+    """The lobe proxy of product sampling (``tracer.lights.environment_product``): the specular
+    reflection and clearcoat as one glossy lobe of alpha = roughness^2, the diffuse lobe, and
+    the transmission as a uniform part, in the proportion this material chooses them at wo
+    (the Fresnel term at the normal standing in for the one at the sampled microfacet). Seen
+    from behind, uniform."""
+    if params[row, INSIDE] != 0.0 or wo[2] <= 0.0:
+        return 0.0, 0.0, 1.0, 1.0
+    fresnel = microfacet.fresnel_dielectric(wo[2], params[row, ETA])
+    reflection, transmission, clearcoat, diffuse = _lobe_probabilities(params, row, True, fresnel)
+    roughness = params[row, ROUGHNESS]
+    return diffuse, reflection + clearcoat, transmission, max(roughness * roughness, 1e-4)

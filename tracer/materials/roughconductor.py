@@ -27,12 +27,13 @@ its values keep their bits.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 from ..jit import jit
 from ..plugins import register
 from . import microfacet
-from .base import GLOSSY, MaterialType, Param, rgb
+from .base import GLOSSY, MaterialType, Param, mean3, rgb
 from .conductor import ETA_PARAM, K_PARAM, fresnel_rgb
 
 CODE = 2  # the dispatch code (``tracer.materials``)
@@ -87,3 +88,14 @@ def sample(params, row, wo, u_lobe, u0, u1):
     f = fresnel_rgb(params, row, ETA, K, microfacet.wo_dot_half(wo, wi))
     r, g, b = rgb(params, row, REFLECTANCE)
     return wi, (r * f[0] * g1, g * f[1] * g1, b * f[2] * g1), p, GLOSSY
+
+
+@jit
+def lobe(params, row, wo):
+    """The lobe proxy of product sampling (``tracer.lights.environment_product``): glossy about
+    the mirror direction, of the geometric mean of the two roughnesses, weighted by the mean
+    reflectance (the Fresnel term left out: it changes the lobe's size, not its shape)."""
+    alpha, alpha_v = params[row, ALPHA], _alpha_v(params, row)
+    if alpha_v > 0.0:
+        alpha = math.sqrt(alpha * alpha_v)
+    return 0.0, mean3(params, row, REFLECTANCE), 0.0, alpha

@@ -114,3 +114,13 @@ def sample(params, row, wo, u_lobe, u0, u1):
                                                 p_coating, u_lobe, u0, u1)
     f, p = eval_pdf(params, row, wo, wi)
     return weighted(wi, f, p, flags)
+
+
+@jit
+def lobe(params, row, wo):
+    """The lobe proxy of product sampling (``tracer.lights.environment_product``): the coating's
+    glossy lobe and the diffuse base, in the proportion this material samples them at wo."""
+    if wo[2] <= 0.0:
+        return 0.0, 0.0, 0.0, 1.0
+    p_coating = specular_probability(1.0 - transmittance(params, row, wo[2]), params[row, SPECULAR_WEIGHT])
+    return 1.0 - p_coating, p_coating, 0.0, params[row, ALPHA]
