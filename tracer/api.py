@@ -97,8 +97,9 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
         (mis: each pixel splits that many samples as earlier passes say is best).
     light_sampling : ``area``, ``solid-angle`` or ``solid-angle-cos`` (default: the scene's
         ``[render] light_sampling``, else ``Strategy``'s default).
-    environment_sampling : ``luminance``, ``uniform`` or ``compensated`` (needs BSDF samples:
-        mis, or ris with BSDF candidates): how the environment is light-sampled.
+    environment_sampling : ``luminance``, ``uniform``, ``compensated`` (needs BSDF samples:
+        mis, or ris with BSDF candidates) or ``product`` (luminance x the shading point's BSDF
+        lobe): how the environment is light-sampled.
     sampler : ``independent``, ``stratified`` or ``sobol`` (default: the scene's ``[render]
         sampler``, else ``independent``); the variance is honest for each (``tracer.film``).
     seed : the same seed gives the same bits whatever ``threads`` (default: all cores).
