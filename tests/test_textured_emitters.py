@@ -9,6 +9,9 @@ What is checked here, and what elsewhere:
   light sampling (area and solid-angle techniques) or only by BSDF sampling agree, on emitters
   whose coordinates Mitsuba cannot light-sample without bias (a to_uv, coordinates beyond
   [0, 1]^2 and a seam; docs/MITSUBA_XML.md);
+- sampling by area x texel luminance (``triangle_texels``) and uniformly by area give the same
+  image, region by region, for light sampling alone and for MIS (this file); the technique's
+  density itself is tested in test_textured_area.py;
 - refusals of radiance textures that cannot be light (this file);
 - agreement with Mitsuba 3.9.1 where its own sampling is exact:
   ``tracer/scenes/mitsuba/textured_emitters.xml`` in ``tests/test_mitsuba_agreement.py``.
@@ -24,6 +27,7 @@ import pytest
 import tracer
 from tracer.errors import InputError
 from tracer.estimator import DirectLighting
+from tracer.lights import emitters, technique_names
 from tracer.study.statistics import image_mean_and_se
 from tracer.textures import lookup
 from tracer.textures.bitmap import read_texels
@@ -208,6 +212,49 @@ def test_light_and_bsdf_samples_see_the_same_texture(scene_file):
         mean, se = _image_mean(films[name])
         z = (mean - bsdf_mean) / np.hypot(se, bsdf_se)
         assert np.all(np.abs(z) < bound), (name, mean, bsdf_mean, z)
+
+
+TILES = (3, 4)  # rows x columns of the regions compared
+
+
+def test_texel_sampling_agrees_with_area_sampling(scene_file, monkeypatch):
+    """Renders of the same scene whose textured triangles are light-sampled by area x texel
+    luminance (``triangle_texels``, the default under ``area``) and uniformly by area
+    (``triangle_area``, as before it: the textured triangles' table turned off), each for
+    ``light`` alone (the new density must be positive wherever the texture is: a region the
+    new technique cannot reach would be dark in it only) and for ``mis`` (its pdf must be the
+    one it samples by, or the weights would not sum to 1), are unbiased estimates of one image.
+    So the means of each of 3 x 4 regions of the image agree per channel: each difference over
+    its standard error (independent seeds; a region's mean over its 64 pixels and 256 samples
+    each, normal) is within the Sidak bound over 2 strategies x 12 regions x 3 channels (the
+    channels are correlated, which Sidak allows). Regions rather than the whole image: a
+    density wrong in one part of an emitter moves the light on one part of the floor."""
+    scene = tracer.load_scene(scene_file)
+    films = {}
+    for technique in ("texels", "area"):
+        if technique == "area":
+            monkeypatch.setattr(emitters, "texel_sampled", lambda scene, tri: np.zeros(len(tri), dtype=bool))
+        for seed, name in enumerate(("light", "mis")):
+            estimator = DirectLighting(scene, tracer.Strategy(name))
+            used = set(technique_names(estimator.lights.tables))
+            assert ("triangle_texels" in used) == (technique == "texels"), used
+            films[technique, name] = tracer.render(scene, tracer.Strategy(name), spp=256, seed=11 + seed
+                                                   + 2 * (technique == "area"), sampler="independent")
+    bound = z_critical(2 * TILES[0] * TILES[1] * 3)
+    for name in ("light", "mis"):
+        (new_mean, new_se), (old_mean, old_se) = (_region_means(films[t, name]) for t in ("texels", "area"))
+        z = (new_mean - old_mean) / np.hypot(new_se, old_se)
+        assert np.all(np.abs(z) < bound), (name, np.abs(z).max(), bound)
+
+
+def _region_means(image) -> tuple[np.ndarray, np.ndarray]:
+    """The mean of each region of ``TILES`` per channel and its standard error, (R, C, 3) each."""
+    mean, var = image.mean, image.variance_of_mean  # (H, W, 3)
+    height, width = mean.shape[:2]
+    rows, columns = TILES
+    shape = (rows, height // rows, columns, width // columns, 3)
+    count = (height // rows) * (width // columns)
+    return (mean.reshape(shape).mean(axis=(1, 3)), np.sqrt(var.reshape(shape).sum(axis=(1, 3))) / count)
 
 
 def _image_mean(image) -> tuple[np.ndarray, np.ndarray]:

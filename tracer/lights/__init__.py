@@ -9,7 +9,10 @@ render's **light sampling** (``--light-sampling``): each technique lists the sam
 emitter kinds it serves (``area``: triangles and spheres by area; ``solid-angle``: spherical
 triangles, spherical rectangles, cones; ``solid-angle-cos``: the first two warped toward the
 receiver's cosine). A quad is a rectangle candidate only where the light sampling has a
-technique for rectangles; else its two triangles are candidates.
+technique for rectangles; else its two triangles are candidates. A triangle of an emitter whose
+radiance is a texture is a ``textured_triangle`` candidate where the light sampling has a
+technique for those (``area``: ``triangle_texels``, a point by area x the texture's luminance,
+``tracer.lights.textured_area``); else a triangle like the others.
 
 Compiled, per lane (templates, built per feature set by ``tracer.kernels``; ``dispatch`` holds
 the render's selection and a generated chain over its techniques):
@@ -79,7 +82,8 @@ class LightTables(NamedTuple):
     selection : the selection's tables (``tracer.lights.selections``), with ``pmf (K,)``.
     technique : (K,) int8 technique code of each candidate (``tracer.lights.techniques``).
     rows : (K + A, ROW_WIDTH) float32, each candidate's parameters in its technique's columns,
-        then A rows that candidates link to (a point light's image: ``point.appendix``).
+        then A rows that candidates link to (a point light's image: ``point.appendix``; a textured
+        triangle's distribution: ``triangle_texels.appendix``).
         float32 as the scene holds vertices and emission; a row is one 64-byte cache line,
         which light sampling reads at random.
     candidate_of_prim : (F + S,) int32, the candidate that scene primitive p (a triangle, or
@@ -192,18 +196,24 @@ def build_tables(scene, light_selection: str = "power", light_sampling: str = "a
     each candidate (-1 - i for point light i).
 
     Candidates (``tracer.lights.emitters``): every emitting triangle of positive area (a
-    rectangular quad is one candidate instead of two triangles where the light sampling has a
-    technique for rectangles), every emitting analytic sphere and every point light of positive
-    intensity, in that order; their techniques follow ``light_sampling``, the environment's
+    textured one is a ``textured_triangle`` where the light sampling has a technique for those;
+    a rectangular quad is one candidate instead of two triangles where it has one for
+    rectangles), every emitting analytic sphere and every point light of positive intensity,
+    in that order; their techniques follow ``light_sampling``, the environment's
     ``environment_sampling`` (``tracer.strategy.ENVIRONMENT_SAMPLINGS``)."""
     selection = plugins.get("light_selection", light_selection)
     chosen = techniques_for(light_sampling)
     tri = emitters.emitting_triangles(scene)
-    rectangles = (emitters.rectangles(scene, tri) if "rectangle" in chosen
-                  else emitters.rectangles(scene, tri[:0]))
-    in_rectangle = (np.isin(tri, np.concatenate(rectangles.prims)) if len(rectangles)
-                    else np.zeros(len(tri), bool))
-    records = {"triangle": emitters.triangles(scene, tri[~in_rectangle]), "rectangle": rectangles,
+    # Textured triangles first go to a technique for them, then quads to one for rectangles.
+    texels = (emitters.texel_sampled(scene, tri) if "textured_triangle" in chosen
+              else np.zeros(len(tri), bool))
+    rest = tri[~texels]
+    rectangles = (emitters.rectangles(scene, rest) if "rectangle" in chosen
+                  else emitters.rectangles(scene, rest[:0]))
+    in_rectangle = (np.isin(rest, np.concatenate(rectangles.prims)) if len(rectangles)
+                    else np.zeros(len(rest), bool))
+    records = {"triangle": emitters.triangles(scene, rest[~in_rectangle]),
+               "textured_triangle": emitters.textured_triangles(scene, tri[texels]), "rectangle": rectangles,
                "sphere": emitters.spheres(scene), "point": emitters.points(scene),
                "directional": emitters.directionals(scene), "environment": emitters.environment(scene)}
     ordered = [records[kind] for kind in emitters.KINDS]
@@ -267,8 +277,9 @@ class LightSample:
     dist : (n,) distance to the sampled point.
     radiance : (n, 3) Le arriving along ``wi`` (area), or I / d^2 (point): the estimator's
         contribution is f |cos theta_i| radiance / pdf. 0 where the sample is invalid. For a
-        textured emitter, the technique's constant (the texture's mean): the estimator looks
-        the texture up at the sampled point (``tracer.textures.lookup.sampled_emission``).
+        textured emitter, the technique's constant (its texture's mean over the candidate's
+        footprint, ``tracer.lights.textured_area``): the estimator looks the texture up at
+        the sampled point (``tracer.textures.lookup.sampled_emission``).
     pdf : (n,) solid-angle pdf including the selection probability; for a point light, its
         selection probability alone. 0 where invalid.
     delta : (n,) bool, a delta light (no other technique can produce this sample).

@@ -1,37 +1,51 @@
 """A scene's emitters by kind: what light techniques sample and light selections choose among.
 
-Six kinds (``KINDS``), each a record of arrays with one row per emitter candidate:
+Seven kinds (``KINDS``), each a record of arrays with one row per emitter candidate:
 
 =========  ===========================================================  =========================
 kind       candidates                                                   record
 =========  ===========================================================  =========================
 triangle   every emitting triangle of positive area (a quad's two       :class:`TriangleEmitters`
            triangles unless it is taken as a rectangle)
+textured_  the triangles of shapes whose radiance is a bitmap or a      :class:`TexturedTriangle-
+triangle   checkerboard, when the render's light sampling has a         Emitters`
+           technique for them (``area``: ``triangle_texels``); else
+           they are triangles (or rectangles) like the others
 rectangle  emitting quads with perpendicular edges, when the render's    :class:`RectangleEmitters`
            light sampling has a technique for rectangles
 sphere     emitting analytic spheres                                    :class:`SphereEmitters`
 point      point lights (and spot lights) of positive intensity         :class:`PointEmitters`
 direc-     directional lights of positive irradiance (delta lights at   :class:`DirectionalEmitters`
 tional     infinity)
-environ-   the scene's environment if it sends light: one candidate,    :class:`Emitters`
-ment       sampled by ``tracer.lights.environment`` (no technique)
+environ-   the scene's environment if it sends light: one candidate,    :class:`Environment-
+ment       sampled by ``tracer.lights.environment`` (no technique)      Emitters`
 =========  ===========================================================  =========================
 
 Every record also says each candidate's flux (for the ``power`` selection), the shape it
 belongs to (``owner``: shape index, -1 - i for point light i, -1 - P - j for directional light
 j, -1 - P - D for the environment; for the ``uniform`` selection), its area (1 for the lights
-without one), its bounds
-(for the light BVH) and the scene primitives it covers (for the pdf of a direction that hits
-it).
+without one), its bounds (for the light BVH: a box and a cone of emission directions) and the
+scene primitives it covers (for the pdf of a direction that hits it). Directional lights and the
+environment are lights at infinity (``Emitters.AT_INFINITY``): their box is the scene's, over
+whose bounding sphere their flux is measured, and the light BVH keeps them out of its tree.
+
+A textured emitter's triangle (or rectangle) takes as its emission the mean of its texture over
+its own (u, v) footprint, integrated exactly (``tracer.lights.textured_area``), not the
+texture's mean over [0, 1]^2: its flux, and so how often the ``power`` and ``bvh`` selections
+choose it, follows the light it really sends, and the ``uniform`` selection splits a textured
+shape among its candidates by that flux instead of their area.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
-KINDS = ("triangle", "rectangle", "sphere", "point", "directional", "environment")
+from . import textured_area
+
+KINDS = ("triangle", "textured_triangle", "rectangle", "sphere", "point", "directional", "environment")
 # Smallest emitting triangle the light table takes: 1 / area must be finite in float32.
 MIN_LIGHT_AREA = float(np.finfo(np.float32).tiny)
 # A quad is sampled as a rectangle when its edges are perpendicular to this relative precision
@@ -49,6 +63,8 @@ class Emitters:
     others).   cos_o : (K,) cos of the emission cone's spread: 1 (a normal's front hemisphere)
     or -1 (every direction).   prims : list of (K,) arrays of the scene primitives the
     candidate covers (triangles: one; a rectangle: two; a sphere: its primitive id).
+    share : (K,) what the ``uniform`` selection splits a light among its candidates by: their
+    flux for a textured emitter; None: ``area``.
     """
 
     flux: np.ndarray
@@ -59,6 +75,10 @@ class Emitters:
     axis: np.ndarray
     cos_o: np.ndarray
     prims: list
+    share: np.ndarray | None = None
+    # A light at infinity (directional, environment): no position, its box the scene's, and
+    # kept out of the light BVH (``tracer.lights.selections.bvh``).
+    AT_INFINITY: ClassVar[bool] = False
 
     def __len__(self) -> int:
         return len(self.flux)
@@ -71,6 +91,14 @@ class TriangleEmitters(Emitters):
     corners: np.ndarray = None  # type: ignore[assignment]
     normal: np.ndarray = None  # type: ignore[assignment]
     emission: np.ndarray = None  # type: ignore[assignment]
+
+
+@dataclass
+class TexturedTriangleEmitters(TriangleEmitters):
+    """A :class:`TriangleEmitters` (emission: each triangle's mean radiance) and ``tables``, (T,)
+    list of each triangle's distribution over its texels (``textured_area.TexelTable``)."""
+
+    tables: list = None  # type: ignore[assignment]
 
 
 @dataclass
@@ -107,8 +135,16 @@ class PointEmitters(Emitters):
 class DirectionalEmitters(Emitters):
     """direction (D, 3) the light travels in; irradiance (D, 3) W/m^2."""
 
+    AT_INFINITY = True
     direction: np.ndarray = None  # type: ignore[assignment]
     irradiance: np.ndarray = None  # type: ignore[assignment]
+
+
+@dataclass
+class EnvironmentEmitters(Emitters):
+    """The environment (none or one), sampled by ``tracer.lights.environment``."""
+
+    AT_INFINITY = True
 
 
 def emitting_triangles(scene) -> np.ndarray:
@@ -146,20 +182,50 @@ def rectangles(scene, tri: np.ndarray) -> RectangleEmitters:
     corners = frames[:, :1] + np.array([0.0, 1.0, 1.0, 0.0])[:, None] * frames[:, 1:2] \
         + np.array([0.0, 0.0, 1.0, 1.0])[:, None] * frames[:, 2:3]
     first_triangle = np.array([scene.shapes[q].first for q in found], dtype=np.int64)
-    return RectangleEmitters(np.pi * area * emission.mean(axis=1), np.array(found, dtype=np.int64), area,
+    textured = np.array([q in scene.textures.emitters for q in found], dtype=bool)
+    if textured.any():  # the area-weighted mean of its two triangles' means
+        halves = np.stack([first_triangle[textured], first_triangle[textured] + 1], axis=1)
+        mean = textured_area.mean_radiance(scene, halves.reshape(-1)).reshape(-1, 2, 3)
+        weight = scene.area[halves]
+        emission[textured] = (mean * weight[..., None]).sum(axis=1) / weight.sum(axis=1)[:, None]
+    flux = np.pi * area * emission.mean(axis=1)
+    return RectangleEmitters(flux, np.array(found, dtype=np.int64), area,
                              corners.min(axis=1), corners.max(axis=1),
                              scene.normal[first_triangle].reshape(-1, 3), np.ones(len(found)),
-                             [first_triangle, first_triangle + 1], frames=frames, emission=emission)
+                             [first_triangle, first_triangle + 1], share=_share(textured, flux, area),
+                             frames=frames, emission=emission)
 
 
-def triangles(scene, tri: np.ndarray) -> TriangleEmitters:
+def triangles(scene, tri: np.ndarray, emission: np.ndarray | None = None) -> TriangleEmitters:
+    """The triangles ``tri`` as candidates; ``emission (T, 3)`` their mean radiance (default
+    ``textured_area.mean_radiance``: the scene's constant, or a textured one's integral)."""
     corners = scene.vertices[scene.faces[tri]]
-    emission = scene.emission[tri]
-    return TriangleEmitters(np.pi * scene.area[tri] * emission.mean(axis=1),
-                            scene.shape_of_triangle[tri].astype(np.int64), scene.area[tri],
-                            corners.min(axis=1), corners.max(axis=1), scene.normal[tri], np.ones(len(tri)),
-                            [tri.astype(np.int64)], corners=corners, normal=scene.normal[tri],
-                            emission=emission)
+    emission = textured_area.mean_radiance(scene, tri) if emission is None else emission
+    owner = scene.shape_of_triangle[tri].astype(np.int64)
+    flux = np.pi * scene.area[tri] * emission.mean(axis=1)
+    textured = np.isin(owner, list(scene.textures.emitters))
+    return TriangleEmitters(flux, owner, scene.area[tri], corners.min(axis=1), corners.max(axis=1),
+                            scene.normal[tri], np.ones(len(tri)), [tri.astype(np.int64)],
+                            share=_share(textured, flux, scene.area[tri]), corners=corners,
+                            normal=scene.normal[tri], emission=emission)
+
+
+def _share(textured: np.ndarray, flux: np.ndarray, area: np.ndarray) -> np.ndarray | None:
+    """``Emitters.share``: the flux of textured candidates, the area of the others (None if
+    none is textured)."""
+    return np.where(textured, flux, area) if textured.any() else None
+
+
+def texel_sampled(scene, tri: np.ndarray) -> np.ndarray:
+    """``(T,)`` bool: which of the emitting triangles ``tri`` are textured emitters that a
+    ``textured_triangle`` technique can sample (``textured_area.sampled_by_texels``)."""
+    return textured_area.sampled_by_texels(scene, tri)
+
+
+def textured_triangles(scene, tri: np.ndarray) -> TexturedTriangleEmitters:
+    """The textured triangles ``tri`` (:func:`texel_sampled`) with their distributions."""
+    tables, mean = textured_area.texel_tables(scene, tri)
+    return TexturedTriangleEmitters(**vars(triangles(scene, tri, mean)), tables=tables)
 
 
 def spheres(scene) -> SphereEmitters:
@@ -215,23 +281,23 @@ def points(scene) -> PointEmitters:
 
 def directionals(scene) -> DirectionalEmitters:
     """Directional lights: flux pi r^2 mean(E) over the scene's bounding sphere (what a disk of
-    the scene's size catches), bounds the scene's box, emitting every way."""
+    the scene's size catches), box the scene's, emitting one way (cone axis: the direction the
+    light travels, spread 0)."""
     irradiance = scene.directional_irradiance
     lit = np.flatnonzero(irradiance.max(axis=1, initial=0.0) > 0.0)
     lo, hi = scene_box(scene)
     radius = scene_radius(lo, hi)
-    axis = np.tile([0.0, 0.0, 1.0], (len(lit), 1))
+    direction = scene.directional_direction[lit]
     return DirectionalEmitters(np.pi * radius * radius * irradiance[lit].mean(axis=1),
                                (-1 - len(scene.point_position) - lit).astype(np.int64), np.ones(len(lit)),
-                               np.tile(lo, (len(lit), 1)), np.tile(hi, (len(lit), 1)), axis,
-                               -np.ones(len(lit)), [], direction=scene.directional_direction[lit],
-                               irradiance=irradiance[lit])
+                               np.tile(lo, (len(lit), 1)), np.tile(hi, (len(lit), 1)), direction.reshape(-1, 3),
+                               np.ones(len(lit)), [], direction=direction, irradiance=irradiance[lit])
 
 
-def environment(scene) -> Emitters:
+def environment(scene) -> EnvironmentEmitters:
     """The scene's environment as one candidate (none without one, or if it is black). Its
-    flux is ``tracer.lights.environment.flux`` over the scene's bounding sphere; its bounds, for
-    the light BVH, are the scene's box, emitting every way."""
+    flux is ``tracer.lights.environment.flux`` over the scene's bounding sphere; its box is the
+    scene's, emitting every way."""
     from . import environment as light
 
     env = scene.environment
@@ -240,8 +306,8 @@ def environment(scene) -> Emitters:
     lit = 1 if power > 0.0 else 0
     axis = np.tile([0.0, 0.0, 1.0], (lit, 1))
     owner = -1 - len(scene.point_position) - len(scene.directional_irradiance)
-    return Emitters(np.full(lit, power), np.full(lit, owner, dtype=np.int64),
-                    np.ones(lit), np.tile(lo, (lit, 1)), np.tile(hi, (lit, 1)), axis, -np.ones(lit), [])
+    return EnvironmentEmitters(np.full(lit, power), np.full(lit, owner, dtype=np.int64), np.ones(lit),
+                               np.tile(lo, (lit, 1)), np.tile(hi, (lit, 1)), axis, -np.ones(lit), [])
 
 
 def scene_radius(lo: np.ndarray, hi: np.ndarray) -> float:
@@ -264,7 +330,9 @@ def scene_box(scene) -> tuple[np.ndarray, np.ndarray]:
 @dataclass
 class Candidates:
     """Every candidate of a render, kinds in the order of ``KINDS`` (the light table's rows):
-    the fields of :class:`Emitters`, concatenated, that light selections read."""
+    the fields of :class:`Emitters`, concatenated, that light selections read (``share``: the
+    area where a record has none), and ``infinite`` (K,) bool, the lights at infinity
+    (``Emitters.AT_INFINITY``: directional lights and the environment, the last candidates)."""
 
     flux: np.ndarray
     owner: np.ndarray
@@ -273,12 +341,21 @@ class Candidates:
     hi: np.ndarray
     axis: np.ndarray
     cos_o: np.ndarray
+    share: np.ndarray
+    infinite: np.ndarray
 
     @classmethod
     def of(cls, records: list[Emitters]) -> "Candidates":
         def cat(name: str, shape: tuple[int, ...]) -> np.ndarray:
-            parts = [np.asarray(getattr(r, name), dtype=np.float64).reshape((-1,) + shape) for r in records]
+            parts = [np.asarray(_field(r, name), dtype=np.float64).reshape((-1,) + shape) for r in records]
             return np.concatenate(parts) if parts else np.zeros((0,) + shape)
 
+        infinite = np.concatenate([np.full(len(r), r.AT_INFINITY) for r in records] or [np.zeros(0, bool)])
         return cls(cat("flux", ()), cat("owner", ()).astype(np.int64), cat("area", ()), cat("lo", (3,)),
-                   cat("hi", (3,)), cat("axis", (3,)), cat("cos_o", ()))
+                   cat("hi", (3,)), cat("axis", (3,)), cat("cos_o", ()), cat("share", ()), infinite)
+
+
+def _field(record: Emitters, name: str) -> np.ndarray:
+    """A record's field; its ``share`` is its area where it has none."""
+    value = getattr(record, name)
+    return record.area if value is None and name == "share" else value

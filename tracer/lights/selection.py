@@ -5,7 +5,8 @@ selections (``tracer.lights.selections``), drawn from Walker's alias table.
   for an emitting triangle and 4 pi * mean(I) for a point light, so bright lights get more
   samples;
 - ``uniform``: each light (an emissive shape or a point light) equally likely, then a triangle
-  of that shape in proportion to its area;
+  of that shape in proportion to its area (a textured emitter's: to its flux, the integral of its
+  texture over the triangle, ``tracer.lights.textured_area``);
 - ``bvh``: by a light BVH, in proportion to each candidate's importance at the shading point
   (``bvh.py``); its pmf depends on the point.
 
@@ -34,7 +35,7 @@ class AliasTables(NamedTuple):
 def alias_tables(selection: str, candidates) -> AliasTables:
     """The alias table of ``selection`` (``power`` or ``uniform``) over ``candidates``
     (``tracer.lights.emitters.Candidates``)."""
-    weight = weights(selection, candidates.flux, candidates.owner, candidates.area)
+    weight = weights(selection, candidates.flux, candidates.owner, candidates.share)
     pmf = weight / weight.sum() if len(weight) else weight
     alias_prob, alias = alias_table(pmf)
     return AliasTables(alias_prob, alias, pmf)
@@ -59,7 +60,8 @@ def weights(selection: str, flux: np.ndarray, light: np.ndarray, area: np.ndarra
     """Unnormalized selection weights of K candidates.
 
     flux : (K,) flux of each candidate.   light : (K,) the light (emissive shape or point light)
-    each candidate belongs to.   area : (K,) area of each candidate (1 for point lights).
+    each candidate belongs to.   area : (K,) what ``uniform`` splits a light by: the area of each
+    candidate (1 for point lights), a textured emitter's flux (``Emitters.share``).
     """
     if selection == "power":
         return np.asarray(flux, dtype=np.float64)

@@ -1,5 +1,6 @@
 """The ``uniform`` light selection: each light (an emissive shape or a point light) equally
-likely, then a candidate of that shape (a triangle of a mesh) in proportion to its area; drawn
+likely, then a candidate of that shape (a triangle of a mesh) in proportion to its area (a
+textured emitter's: its flux, ``tracer.lights.emitters.Emitters.share``); drawn
 with Walker's alias table (``tracer.lights.selection``). A plug-in (``tracer.lights.selections``).
 """
 

@@ -1,8 +1,8 @@
 """Light techniques: how a direction toward one emitter candidate is drawn, one module each.
 
 Each module is a plug-in (``tracer.plugins.LightTechnique``) that says which emitter kinds it
-samples (``tracer.lights.emitters``: ``triangle``, ``rectangle``, ``sphere``, ``point``,
-``directional``) and
+samples (``tracer.lights.emitters``: ``triangle``, ``textured_triangle``, ``rectangle``,
+``sphere``, ``point``, ``directional``) and
 for which ``--light-sampling`` values, and defines (compiled, per lane):
 
 - ``rows(emitters) -> (K, width) float32``: its table row for each emitter of the kinds it takes
@@ -29,6 +29,8 @@ spherical_rectangle         6     rectangle  solid-angle         ``spherical_rec
 spherical_rectangle_cos     7     rectangle  solid-angle-cos     ``spherical_rectangle_cos.py``
 directional                 8     direc-     every one           ``directional.py``
                                   tional
+triangle_texels             9     textured_  area                ``triangle_texels.py``
+                                  triangle
 ==========================  ====  =========  ==================  ===================================
 
 Adding a technique: one module here (found by ``plugins.discover``); a new ``--light-sampling``
