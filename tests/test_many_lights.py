@@ -3,7 +3,8 @@
 The unbiasedness of every selection and of ris against closed forms is in test_estimators (the
 polygon lights and the furnace) and on the shipped scenes in test_scenes; here: that the BVH
 draws candidates with exactly the pmf it reports, that its pmf is 0 only where a light cannot
-contribute, that the tree bounds what it claims to, and the many-light scenes themselves.
+contribute (both on a scene of bounded lights and on the same with an environment and directional
+lights, which the BVH chooses between with its tree), that the tree bounds what it claims to, and the many-light scenes themselves.
 """
 
 from __future__ import annotations
@@ -52,9 +53,22 @@ def many_light_scene(seed: int = 3) -> dict:
             "shapes": shapes, "lights": lights}
 
 
-@pytest.fixture(scope="module")
-def scene():
-    return load_scene(many_light_scene())
+def with_lights_at_infinity(description: dict) -> dict:
+    """The scene with a constant environment and two directional lights (one pointing down, one
+    grazing), which the light BVH keeps out of its tree and chooses between with the tree by
+    their irradiance at the point (``tracer.lights.selections.bvh``)."""
+    described = dict(description)
+    described["lights"] = description["lights"] + [
+        {"type": "directional", "direction": [0.2, -1.0, 0.1], "irradiance": [2.0, 2.0, 2.0]},
+        {"type": "directional", "direction": [1.0, -0.05, 0.0], "irradiance": [0.5, 1.0, 0.5]}]
+    described["environment"] = {"radiance": [0.3, 0.4, 0.5]}
+    return described
+
+
+@pytest.fixture(scope="module", params=["bounded", "with lights at infinity"])
+def scene(request):
+    description = many_light_scene()
+    return load_scene(description if request.param == "bounded" else with_lights_at_infinity(description))
 
 
 def shading_points(rng, count: int) -> tuple[np.ndarray, np.ndarray]:
