@@ -42,15 +42,17 @@ from . import metrics, statistics
 # The suite's columns: every strategy, then light and MIS with each solid-angle light sampling
 # (``tracer.lights``), then light, MIS and ris with lights picked by a light BVH, then (on the
 # cases with an environment only: ``Case.environment``) light and MIS with the environment
-# sampled uniformly and MIS with it compensated, as (column, strategy, light sampling, light
-# selection, environment sampling).
+# sampled uniformly, MIS with it compensated, and light and MIS with it sampled by product with
+# the BSDF, as (column, strategy, light sampling, light selection, environment sampling).
 COLUMNS = tuple((name, name, "area", "power", "luminance") for name in STRATEGIES) + tuple(
     (f"{name}_{sampling}", name, sampling, "power", "luminance") for name in ("light", "mis")
     for sampling in ("solid-angle", "solid-angle-cos")) + tuple(
     (f"{name}_bvh", name, "area", "bvh", "luminance") for name in ("light", "mis", "ris")) + (
     ("light_uniform-env", "light", "area", "power", "uniform"),
     ("mis_uniform-env", "mis", "area", "power", "uniform"),
-    ("mis_compensated-env", "mis", "area", "power", "compensated"))
+    ("mis_compensated-env", "mis", "area", "power", "compensated"),
+    ("light_product-env", "light", "area", "power", "product"),
+    ("mis_product-env", "mis", "area", "power", "product"))
 COLUMN_NAMES = tuple(column for column, *_ in COLUMNS)
 # The columns that differ from another only in how the environment is sampled.
 ENVIRONMENT_COLUMNS = tuple(column for column, *_, environment in COLUMNS if environment != "luminance")
@@ -397,7 +399,10 @@ def heat_map(cells: list[Cell], path: Path) -> None:
             ax.text(
                 j, i, f"{c.relmse:.2g}\nz {c.z:+.1f}{bad}", ha="center", va="center", fontsize=7, color=color
             )
-    ax.set_xticks(range(len(COLUMN_NAMES)), [n.replace("_", "\n") for n in COLUMN_NAMES], fontsize=8)
+    # One word a line ("mis", "compensated", "env"): the environment columns' names are too
+    # wide for a cell on one line.
+    ax.set_xticks(range(len(COLUMN_NAMES)),
+                  [n.replace("_", "\n").replace("-env", "\nenv") for n in COLUMN_NAMES], fontsize=8)
     ax.set_yticks(range(len(names)), names, fontsize=8)
     ax.set_title("relMSE per strategy and case (z: bias of the image mean, in standard errors)", fontsize=10)
     fig.colorbar(im, ax=ax, label="log10 relMSE", fraction=0.04)
