@@ -22,7 +22,9 @@ Configurations (each says what it is known to stress):
 - ``offset_rectangle``: a narrow light at x = 1000, where float32(origin) + float32(edge) is not
   float32(origin + edge): the rectangle sampled must be the one Embree intersects;
 - ``parallelogram``: a quad that is not a rectangle, sampled as two spherical triangles;
-- ``sliver``: a nearly degenerate triangle (a mesh with one thin face).
+- ``sliver``: a nearly degenerate triangle (a mesh with one thin face);
+- ``far_rectangle``, ``far_parallelogram``: lights small for their distance, which the
+  solid-angle techniques sample by area (``tracer.lights.far_light``).
 """
 
 from __future__ import annotations
@@ -114,7 +116,26 @@ edge1 = [0.8, 0.0, 0.0]
 edge2 = [0.3, 0.2, 0.6]
 emission = [3.0, 2.0, 1.0]
 """, (0.1, 0.0, 0.5), (0.0, 1.0, 0.0)),
+    "far_rectangle": ("""
+[[shapes]]
+type = "quad"
+origin = [0.4, 3.0, -0.5]
+edge1 = [0.3, 0.0, 0.0]
+edge2 = [0.0, 0.0, 0.2]
+emission = [4.0, 4.0, 4.0]
+""", (0.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+    "far_parallelogram": ("""
+[[shapes]]
+type = "quad"
+origin = [-0.6, 3.5, 0.2]
+edge1 = [0.3, 0.0, 0.0]
+edge2 = [0.1, 0.05, 0.2]
+emission = [4.0, 4.0, 4.0]
+""", (0.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
 }
+# Lights small for their distance from x, which the solid-angle techniques sample by area
+# (tracer.lights.far_light: (radius / distance)^2 under FAR).
+FAR_CASES = ("far_rectangle", "far_parallelogram")
 # A quad's triangles face edge1 x edge2: every light here faces x.
 TESTS = [(case, sampling) for case in CASES for sampling in SAMPLINGS]
 N_STAT = len(TESTS)
@@ -315,3 +336,47 @@ def test_sample_pdf_equals_pdf_of_the_hit(case, sampling, tmp_path):
     k = int(found.sum())
     again = sampler.pdf(np.tile(x, (k, 1)), prim[found], wi[found], dist[found], np.tile(n, (k, 1)))
     np.testing.assert_allclose(again, pdf[found], rtol=RTOL, atol=0)
+
+
+@pytest.mark.parametrize("case", FAR_CASES)
+@pytest.mark.parametrize("sampling", ("solid-angle", "solid-angle-cos"))
+def test_far_lights_are_sampled_by_area(case, sampling, tmp_path):
+    """Where a light is small for its distance (``tracer.lights.far_light.far``), a solid-angle
+    technique steps aside: its pdf of every direction equals area sampling's (the quad's area
+    density times d^2 / cos theta_light, whether the quad is one rectangle or two triangles),
+    lane by lane, both in sample() and pdf(); the chi-square and hit tests above check that its
+    samples follow that pdf. And the far test is what decides: a light as small close by (its
+    corner moved toward x to 1/8 of its distance, its edges kept: (radius / distance)^2 about 64
+    times larger, over FAR) is
+    sampled by solid angle, whose pdf differs."""
+    from tracer.lights import far_light
+
+    def pdfs(scene, sampling_name, x, n, m=2_000):
+        sampler, rays = LightSampler(scene, "power", sampling_name), SceneRays(scene)
+        gen = np.random.default_rng(7)
+        s = sampler.sample(gen.random(m), gen.random((m, 2)), np.tile(x, (m, 1)), np.tile(n, (m, 1)))
+        prim, dist = first_hits(scene, rays, x, s.wi)
+        hit = (s.pdf > 0.0) & (prim >= 0)
+        k = int(hit.sum())
+        xs, ns = np.tile(x, (k, 1)), np.tile(n, (k, 1))
+        area = LightSampler(scene, "power", "area").pdf(xs, prim[hit], s.wi[hit], dist[hit], ns)
+        return s.pdf[hit], sampler.pdf(xs, prim[hit], s.wi[hit], dist[hit], ns), area
+
+    scene, _, _, x, n = setup(case, sampling, tmp_path)
+    corners = scene.vertices - x
+    radius2 = np.max(np.sum((corners - corners.mean(axis=0)) ** 2, axis=1))
+    assert radius2 < far_light.FAR * np.sum(corners.mean(axis=0) ** 2)  # the case is far
+    sampled, again, area = pdfs(scene, sampling, x, n)
+    assert len(sampled) > 1_000
+    np.testing.assert_allclose(sampled, area, rtol=RTOL, atol=0)
+    np.testing.assert_allclose(again, area, rtol=RTOL, atol=0)
+
+    text, _, _ = CASES[case]
+    line = next(line for line in text.splitlines() if line.startswith("origin"))
+    origin = np.array([float(v) for v in line.split("=")[1].strip(" []").split(",")])
+    near = text.replace(line, f"origin = [{', '.join(repr(float(v)) for v in x + (origin - x) / 8.0)}]")
+    path = tmp_path / f"{case}_near.toml"
+    path.write_text(textwrap.dedent(CAMERA + near))
+    sampled, again, area = pdfs(load_scene(path), sampling, x, n)
+    np.testing.assert_allclose(again, sampled, rtol=RTOL, atol=0)
+    assert np.max(np.abs(sampled / area - 1.0)) > 1e-3

@@ -11,8 +11,9 @@ directions w_c, placed at the corners of the square that the map sends to them; 
 (Physically Based Rendering 4th ed., sec. 6.6.4, bilinear patches that are rectangles) does the
 same, and its pdf for a given direction needs the inverse map.
 
-As in pbrt-v4, rectangles that subtend less than ``MIN_SOLID_ANGLE`` sr are sampled uniformly
-by area instead (sample and pdf choose alike). Unlike pbrt-v4, nearly hemispherical ones (over
+Rectangles small for their distance from x (``tracer.lights.far_light``) and, as in pbrt-v4,
+rectangles that subtend less than ``MIN_SOLID_ANGLE`` sr are sampled uniformly by area instead
+(sample and pdf choose alike). Unlike pbrt-v4, nearly hemispherical ones (over
 6.22 sr, a shading point close under a large light) are not: ``spherical_rectangle`` stays
 accurate up to 2 pi (tested to 2 pi - 6e-12), while area sampling of such a light is hopeless
 (a 2000 x 2000 light 1 above the floor: a 16-spp image mean 64% low with a tiny standard
@@ -41,6 +42,7 @@ from ...jit import jit, jit_called, opaque
 from ...plugins import LightTechnique, register
 from .. import bilinear
 from .. import spherical_rectangle as urena
+from ..far_light import far
 
 NAME = "spherical_rectangle"
 CORNER, EDGE_U, EDGE_V, NORMAL, EMISSION, INV_AREA = 0, 3, 6, 9, 12, 15
@@ -76,6 +78,18 @@ def _frame(rows, k: int):
     ev = (float(rows[k, EDGE_V]), float(rows[k, EDGE_V + 1]), float(rows[k, EDGE_V + 2]))
     normal = (float(rows[k, NORMAL]), float(rows[k, NORMAL + 1]), float(rows[k, NORMAL + 2]))
     return corner, eu, ev, normal
+
+
+@jit
+def _by_area(x, corner, eu, ev):
+    """Whether the rectangle is sampled by area from ``x``: far for its size
+    (``tracer.lights.far_light``), else subtending under ``MIN_SOLID_ANGLE``; returns
+    ``(by_area, omega)``, omega computed only where the first test does not decide."""
+    centre = add_scaled(add_scaled(corner, 0.5, eu), 0.5, ev)
+    if far(x, centre, 0.25 * (dot(eu, eu) + dot(ev, ev))):
+        return True, 0.0
+    omega = urena.solid_angle(x, corner, eu, ev)
+    return not omega > MIN_SOLID_ANGLE, omega
 
 
 @jit
@@ -119,8 +133,8 @@ def sample_warped(rows, k: int, x, n, cos_warp: bool, u0: float, u1: float):
     """A point on rectangle row ``k`` seen from ``x`` (normal ``n``): ``(wi, dist, le, pdf)``
     with pdf in solid angle; 0 for the back side."""
     corner, eu, ev, normal = _frame(rows, k)
-    omega = urena.solid_angle(x, corner, eu, ev)
-    if not omega > MIN_SOLID_ANGLE:
+    by_area, omega = _by_area(x, corner, eu, ev)
+    if by_area:
         point = add_scaled(add_scaled(corner, u0, eu), u1, ev)
         wi, d, le, _ = _toward(rows, k, x, point, normal, 1.0)
         cos_light = -dot(normal, wi)
@@ -142,8 +156,8 @@ def pdf_warped(rows, k: int, x, n, cos_warp: bool, wi, dist: float) -> float:
     cos_light = -dot(normal, wi)
     if not cos_light > 0.0:
         return 0.0
-    omega = urena.solid_angle(x, corner, eu, ev)
-    if not omega > MIN_SOLID_ANGLE:
+    by_area, omega = _by_area(x, corner, eu, ev)
+    if by_area:
         return rows[k, INV_AREA] * dist * dist / cos_light
     if not cos_warp:
         return 1.0 / omega

@@ -15,8 +15,9 @@ zero-variance. pbrt-v4 (Pharr, Jakob and Humphreys, Physically Based Rendering 4
 6.5.4, "Triangle sampling") uses the same warp; its pdf for a given direction needs the
 inverse of Arvo's map (``tracer.lights.spherical_triangle.invert``).
 
-As pbrt-v4 does, triangles that subtend less than ``MIN_SOLID_ANGLE`` sr are sampled by area
-instead; sample and pdf make the same choice from x, so the pair stays consistent. Below 3e-4
+Triangles small for their distance from x (``tracer.lights.far_light``) and, as pbrt-v4 does,
+triangles that subtend less than ``MIN_SOLID_ANGLE`` sr are sampled by area instead; sample
+and pdf make the same choice from x, so the pair stays consistent. Below 3e-4
 sr the d^2 / cos theta_light factor varies little over the triangle, so area sampling is
 already close to uniform in solid angle and cheaper (no trigonometry; tracer's
 spherical-triangle code itself stays accurate far below, to 1e-15 sr). Unlike pbrt-v4,
@@ -36,6 +37,7 @@ from ...jit import jit, jit_called, opaque
 from ...plugins import LightTechnique, register
 from .. import bilinear
 from .. import spherical_triangle as arvo
+from ..far_light import far
 from . import triangle_area
 from .triangle_area import EMISSION, NORMAL, V0, V1, V2, WIDTH
 
@@ -53,6 +55,19 @@ def _vertices(rows, k: int):
     b = (float(rows[k, V1]), float(rows[k, V1 + 1]), float(rows[k, V1 + 2]))
     c = (float(rows[k, V2]), float(rows[k, V2 + 1]), float(rows[k, V2 + 2]))
     return a, b, c
+
+
+@jit
+def _by_area(x, a, b, c):
+    """``(by_area, omega)``: whether the triangle is sampled by area from ``x``, far for its
+    size (``tracer.lights.far_light``: radius about the centroid) or subtending under
+    ``MIN_SOLID_ANGLE``; omega computed only where the first test does not decide."""
+    centre = ((a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0, (a[2] + b[2] + c[2]) / 3.0)
+    ra, rb, rc = sub(a, centre), sub(b, centre), sub(c, centre)
+    if far(x, centre, max(dot(ra, ra), dot(rb, rb), dot(rc, rc))):
+        return True, 0.0
+    omega = arvo.solid_angle(x, a, b, c)
+    return not omega > MIN_SOLID_ANGLE, omega
 
 
 @jit
@@ -82,8 +97,8 @@ def sample_warped(rows, k: int, x, n, cos_warp: bool, u0: float, u1: float):
     """A direction toward triangle row ``k`` from ``x`` (normal ``n``): ``(wi, dist, le, pdf)``
     with pdf in solid angle; pdf 0 (and le 0) for the back side or a degenerate triangle."""
     a, b, c = _vertices(rows, k)
-    omega = arvo.solid_angle(x, a, b, c)
-    if not omega > MIN_SOLID_ANGLE:
+    by_area, omega = _by_area(x, a, b, c)
+    if by_area:
         return triangle_area.sample_point(rows, k, x, u0, u1)
     warp_pdf = 1.0
     if cos_warp:
@@ -108,8 +123,8 @@ def pdf_warped(rows, k: int, x, n, cos_warp: bool, wi, dist: float) -> float:
     if not -dot(normal, wi) > 0.0:
         return 0.0
     a, b, c = _vertices(rows, k)
-    omega = arvo.solid_angle(x, a, b, c)
-    if not omega > MIN_SOLID_ANGLE:
+    by_area, omega = _by_area(x, a, b, c)
+    if by_area:
         return triangle_area.pdf_point(rows, k, x, wi, dist)
     if not cos_warp:
         return 1.0 / omega
