@@ -26,7 +26,7 @@ import tracer
 from tracer.estimator import DirectLighting
 from tracer.geometry import SceneRays
 from tracer.jit import jit
-from tracer.lights import LightSampler, textured_area
+from tracer.lights import LightSampler, technique_names, textured_area
 from tracer.textures import LUMINANCE, lookup
 
 import chi2
@@ -333,3 +333,76 @@ def test_selections_weigh_textured_triangles_by_their_light(tmp_path):
                                rtol=1e-12)
     np.testing.assert_allclose(uniform.pmf[uniform.tables.candidate_of_prim[triangles]], [0.5 * flux[0] / flux[:2].sum(), 0.5 * flux[1] / flux[:2].sum(),
                                          0.25, 0.25], rtol=1e-12)
+
+
+def _obj_scene(tmp_path: Path, name: str, uv: np.ndarray, pixels: np.ndarray, extra: str = ""):
+    """One emitting triangle (0,0,0), (1,0,0), (0,1,0) facing +z, its corners' (u, v) ``uv (3, 2)``,
+    its radiance the bitmap ``pixels`` (nearest), and ``extra`` XML (another light)."""
+    vertices = "".join(f"v {x} {y} 0\nvt {float(u)!r} {float(v)!r}\n" for (x, y), (u, v) in zip([(0, 0), (1, 0), (0, 1)], uv,
+                                                                                   strict=True))
+    (tmp_path / f"{name}.obj").write_text(vertices + "f 1/1 2/2 3/3\n")
+    _write(tmp_path / f"{name}.exr", pixels)
+    (tmp_path / f"{name}.xml").write_text(
+        f'<scene version="3.0.0">{CAMERA}<shape type="obj"><string name="filename" value="{tmp_path / name}.obj"/>'
+        '<boolean name="face_normals" value="true"/><emitter type="area"><texture name="radiance" type="bitmap">'
+        f'<string name="filename" value="{tmp_path / name}.exr"/><string name="filter_type" value="nearest"/>'
+        f'</texture></emitter></shape>{extra}</scene>')
+    return tracer.load_scene(tmp_path / f"{name}.xml")
+
+
+def test_sliver_footprints_are_sampled_by_area(tmp_path):
+    """A triangle whose (u, v) footprint is a sliver (twice its area over its longest edge squared
+    below ``MIN_CONDITION``) would have its map from barycentrics held in float32 too poorly for
+    an exact pdf (a reviewer measured a pdf 0 everywhere at a width of 1e-8, and 2% of bias at
+    1e-6): it is sampled uniformly by area. A thin one above the bound (width 1e-3, 9 cells) is
+    texel-sampled with an exact pdf: ``sample``'s pdf equals ``pdf`` of the same point, lane by
+    lane (RTOL: the same float64 formulas on the same float32 table)."""
+    pixels = 0.5 + np.random.default_rng(3).random((100, 100, 3))
+    x, n = np.array([0.3, 0.3, 0.7]), np.array([0.0, 0.0, -1.0])
+    for width, texels in ((1e-8, False), (1e-6, False), (1e-3, True)):
+        uv = np.array([[0.003, 0.001], [0.9, 0.95], [0.9 + width, 0.95 - width]])
+        scene = _obj_scene(tmp_path, f"sliver{width:g}", uv, pixels)
+        assert textured_area.sampled_by_texels(scene, np.arange(1))[0] == texels
+        sampler = LightSampler(scene, "power", "area")
+        assert technique_names(sampler.tables) == (("triangle_texels",) if texels else ("triangle_area",))
+        m = 20_000
+        gen = np.random.default_rng(5)
+        s = sampler.sample(gen.random(m), gen.random((m, 2)), np.tile(x, (m, 1)), np.tile(n, (m, 1)))
+        assert np.all(s.pdf > 0.0)
+        again = sampler.pdf(np.tile(x, (m, 1)), np.zeros(m, dtype=np.int64), s.wi, s.dist, np.tile(n, (m, 1)))
+        np.testing.assert_allclose(again, s.pdf, rtol=RTOL)
+
+
+def test_black_footprint_is_no_light(tmp_path):
+    """A textured triangle whose footprint covers only black texels (a 4 x 4 bitmap lit in one
+    texel the footprint misses) sends no light: it is no candidate, so the ``uniform``
+    selection does not divide by its flux of 0 (it made every pmf NaN and the image black),
+    and the point light beside it is chosen with probability 1 by every selection."""
+    pixels = np.zeros((4, 4, 3))
+    pixels[0, 3] = 5.0  # the top right texel; the footprint is the lower left quarter
+    uv = np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 0.5]])
+    point = '<emitter type="point"><point name="position" x="0.2" y="0.2" z="1"/></emitter>'
+    scene = _obj_scene(tmp_path, "black", uv, pixels, point)
+    for selection in ("power", "uniform", "bvh"):
+        sampler = LightSampler(scene, selection, "area")
+        assert sampler.count == 1
+        k, pmf = sampler.choose(np.array([0.3, 0.9]), np.zeros((2, 3)), np.tile([0.0, 0.0, 1.0], (2, 1)))
+        assert np.all(pmf == 1.0), (selection, pmf)
+
+
+def test_distributions_too_large_for_the_table_fall_back_to_area(tmp_path, monkeypatch):
+    """When the textured triangles' distributions would take more of the light table than
+    ``TEXEL_TABLE_FLOATS`` (here cut to 64 floats, as a mesh of 200,000 textured triangles
+    would need), they are sampled by area with a note, not refused (an InputError before)."""
+    from tracer import lights, notices
+
+    notes = []
+    previous = notices.set_handler(notes.append)
+    try:
+        monkeypatch.setattr(lights, "TEXEL_TABLE_FLOATS", 64)
+        scene = _scene(tmp_path, "bilinear repeat")
+        sampler = LightSampler(scene, "power", "area")
+    finally:
+        notices.set_handler(previous)
+    assert "triangle_texels" not in technique_names(sampler.tables)
+    assert any("sampled by area" in line for line in notes), notes

@@ -44,7 +44,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .. import plugins
+from .. import notices, plugins
 from ..kernels import UNBOUND, kernel, template
 from . import emitters
 from . import environment as environment_light
@@ -52,6 +52,9 @@ from .bounds import emitter_spheres, may_reach
 
 # The widest row any technique writes: one 64-byte cache line of float32.
 ROW_WIDTH = plugins.LIGHT_ROW_WIDTH
+# The share of the light table (``projected_images.MAX_TABLE_FLOATS``, 2^24 floats) textured
+# emitters' distributions may take; beyond, they are sampled by area (``build_tables``).
+TEXEL_TABLE_FLOATS = 3 * 2**22
 # Bound per build (``tracer.kernels``): the scene has an environment; it is light-sampled by
 # product with the shading point's lobe (``environment_product``).
 ENVIRONMENT = PRODUCT = False
@@ -190,6 +193,19 @@ def techniques_for(light_sampling: str) -> dict[str, plugins.LightTechnique]:
     return chosen
 
 
+def _triangle_records(scene, tri: np.ndarray, texels: np.ndarray, chosen: dict) -> dict:
+    """The ``triangle``, ``textured_triangle`` and ``rectangle`` records of the emitting
+    triangles ``tri``: those where ``texels`` go to the technique for textured triangles, then
+    quads to one for rectangles where the light sampling has one, the rest as triangles."""
+    rest = tri[~texels]
+    rectangles = (emitters.rectangles(scene, rest) if "rectangle" in chosen
+                  else emitters.rectangles(scene, rest[:0]))
+    in_rectangle = (np.isin(rest, np.concatenate(rectangles.prims)) if len(rectangles)
+                    else np.zeros(len(rest), bool))
+    return {"triangle": emitters.triangles(scene, rest[~in_rectangle]),
+            "textured_triangle": emitters.textured_triangles(scene, tri[texels]), "rectangle": rectangles}
+
+
 def build_tables(scene, light_selection: str = "power", light_sampling: str = "area",
                  environment_sampling: str = "luminance") -> tuple[LightTables, np.ndarray]:
     """The light tables of ``scene`` (a ``tracer.scene.Scene``), and ``(K,)`` the shape index of
@@ -204,18 +220,17 @@ def build_tables(scene, light_selection: str = "power", light_sampling: str = "a
     selection = plugins.get("light_selection", light_selection)
     chosen = techniques_for(light_sampling)
     tri = emitters.emitting_triangles(scene)
-    # Textured triangles first go to a technique for them, then quads to one for rectangles.
     texels = (emitters.texel_sampled(scene, tri) if "textured_triangle" in chosen
               else np.zeros(len(tri), bool))
-    rest = tri[~texels]
-    rectangles = (emitters.rectangles(scene, rest) if "rectangle" in chosen
-                  else emitters.rectangles(scene, rest[:0]))
-    in_rectangle = (np.isin(rest, np.concatenate(rectangles.prims)) if len(rectangles)
-                    else np.zeros(len(rest), bool))
-    records = {"triangle": emitters.triangles(scene, rest[~in_rectangle]),
-               "textured_triangle": emitters.textured_triangles(scene, tri[texels]), "rectangle": rectangles,
-               "sphere": emitters.spheres(scene), "point": emitters.points(scene),
-               "directional": emitters.directionals(scene), "environment": emitters.environment(scene)}
+    records = _triangle_records(scene, tri, texels, chosen)
+    textured = records["textured_triangle"]
+    if len(textured) and hasattr(chosen["textured_triangle"].functions(), "table_floats") and \
+            chosen["textured_triangle"].functions().table_floats(textured) > TEXEL_TABLE_FLOATS:
+        notices.note(f"the textured emitters' {len(textured):,} triangles would take more of the light table "
+                     "than it holds for them: sampled by area, not by their textures")
+        records = _triangle_records(scene, tri, np.zeros(len(tri), bool), chosen)
+    records.update(sphere=emitters.spheres(scene), point=emitters.points(scene),
+                   directional=emitters.directionals(scene), environment=emitters.environment(scene))
     ordered = [records[kind] for kind in emitters.KINDS]
     count = sum(len(r) for r in ordered)
     rows = np.zeros((count, ROW_WIDTH), dtype=np.float32)

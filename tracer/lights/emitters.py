@@ -152,8 +152,14 @@ def emitting_triangles(scene) -> np.ndarray:
     so a triangle with area and some positive channel has positive flux. The table holds 1 /
     area in float32: a triangle smaller than float32's smallest normal number (a sphere of
     radius 1e-20) would put inf there, so it is left out like a zero-area one (never
-    light-sampled; a BSDF sample that hits it gets weight 1, consistently)."""
-    return np.flatnonzero((scene.area >= MIN_LIGHT_AREA) & (scene.emission.max(axis=1, initial=0.0) > 0.0))
+    light-sampled; a BSDF sample that hits it gets weight 1, consistently). A textured
+    emitter's triangle whose footprint holds only black texels (its exact integral 0,
+    ``textured_area.mean_radiance``) sends no light and is left out too: its flux of 0 would
+    make the ``uniform`` selection's split 0 / 0."""
+    tri = np.flatnonzero((scene.area >= MIN_LIGHT_AREA) & (scene.emission.max(axis=1, initial=0.0) > 0.0))
+    if scene.textures.emitters:
+        tri = tri[textured_area.mean_radiance(scene, tri).max(axis=1, initial=0.0) > 0.0]
+    return tri
 
 
 def rectangles(scene, tri: np.ndarray) -> RectangleEmitters:

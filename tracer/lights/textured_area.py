@@ -44,8 +44,14 @@ Blocks of F_t's area below what float32 vertices can hold (about 1e-14 of a bloc
 out. What the density is exact to: the float32 differences ``_invert`` divides by place a point
 within its block with a relative error below 6e-8.
 
-Triangles whose footprint is degenerate (area below ``MIN_FOOTPRINT`` cells) or spans more than
-``MAX_TEXEL_CELLS`` cells keep the texture's mean (the scene's constant) and are sampled by area.
+Triangles whose footprint is degenerate (area below ``MIN_FOOTPRINT`` cells), a sliver (twice
+its area under ``MIN_CONDITION`` times its longest edge squared: the float32 map of the light
+table would not be the footprint) or spans more than ``MAX_TEXEL_CELLS`` cells keep the
+texture's mean (the scene's constant) and are sampled by area; so does every textured triangle
+of a scene whose footprints span more than ``MAX_TOTAL_CELLS`` together, and of one whose
+distributions would not fit the light table (``tracer.lights.build_tables``). A triangle whose
+footprint integral is 0 (black texels only) sends no light and is no candidate
+(``tracer.lights.emitters.emitting_triangles``).
 """
 
 from __future__ import annotations
@@ -67,6 +73,15 @@ TABLE_FLOATS = 2**22
 # A footprint of less texture-space area than this (in cells) is degenerate: the (u, v) map is
 # not invertible and the triangle keeps the texture's mean, sampled by area.
 MIN_FOOTPRINT = 1e-9
+# A footprint thinner than this (twice its area over its longest edge squared) is a sliver:
+# the light table holds its map from barycentrics in float32, whose determinant would then
+# lose more than ~1e-4 of its value (float32's 6e-8 over this); such a triangle keeps the
+# texture's mean and is sampled by area.
+MIN_CONDITION = 2.0**-10
+# Texel cells all textured triangles' footprints' boxes may span together (2^26: 16 textures of
+# 2048 x 2048 once each). Beyond, every textured triangle keeps its texture's mean and is
+# sampled by area: the integrals would take minutes and gigabytes.
+MAX_TOTAL_CELLS = 2**26
 # The least share of its CDF a block (or row) of positive weight keeps (module docstring).
 MIN_SHARE = 2.0**-22
 # Cells processed at once (memory: ~1 KB each while clipping).
@@ -339,8 +354,13 @@ def footprints(scene, triangles: np.ndarray) -> tuple[list, np.ndarray, np.ndarr
     finite = np.all(np.isfinite(corners), axis=(1, 2))
     corners[~finite] = 0.0
     _, size = cell_box(corners)
-    usable = (finite & (footprint_area(corners) >= MIN_FOOTPRINT)
-              & (size[:, 0] * size[:, 1] <= MAX_TEXEL_CELLS))
+    cells = size[:, 0].astype(np.float64) * size[:, 1]  # in float: int64 overflows on absurd (u, v)
+    area = footprint_area(corners)
+    edge2 = np.max(np.sum((corners - np.roll(corners, 1, axis=1)) ** 2, axis=2), axis=1)
+    usable = (finite & (area >= MIN_FOOTPRINT) & (2.0 * area >= MIN_CONDITION * edge2)
+              & (cells <= MAX_TEXEL_CELLS))
+    if cells[usable].sum() > MAX_TOTAL_CELLS:  # the integrals would take minutes: none taken
+        usable[:] = False
     texture[~usable] = -1
     corners[texture < 0] = 0.0
     return grids, texture, corners

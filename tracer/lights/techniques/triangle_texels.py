@@ -72,6 +72,23 @@ def rows(emitters) -> np.ndarray:
     return out
 
 
+def _layout(tables) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(packed, polygons, owner)``: each triangle's rows of CDFs and links (16 floats a row),
+    its count of polygon rows, and the triangle each block belongs to."""
+    block_rows, columns = tables.shape[:, 0], tables.shape[:, 1]
+    link_start = tables.starts()[2]
+    packed = -(-((block_rows + 1) + block_rows * (columns + 1) + block_rows * columns) // 16)
+    owner = np.repeat(np.arange(len(block_rows)), np.diff(link_start))
+    polygons = np.bincount(owner[tables.polygon >= 0], minlength=len(block_rows))
+    return packed, polygons, owner
+
+
+def table_floats(emitters) -> int:
+    """The floats the triangles' distributions take in the light table (:func:`appendix`)."""
+    packed, polygons, _ = _layout(emitters.tables)
+    return 16 * int(np.sum(1 + packed + polygons))
+
+
 def appendix(emitters, start: int) -> tuple[np.ndarray, np.ndarray, int]:
     """The rows of the triangles' distributions (``textured_area.TexelTables``), to follow the
     table's rows from row ``start`` (``tracer.lights.build_tables``): ``(link (T,), rows (m, 16),
@@ -80,9 +97,7 @@ def appendix(emitters, start: int) -> tuple[np.ndarray, np.ndarray, int]:
     tables = emitters.tables
     block_rows, columns = tables.shape[:, 0], tables.shape[:, 1]
     row_start, column_start, link_start = tables.starts()
-    packed = -(-((block_rows + 1) + block_rows * (columns + 1) + block_rows * columns) // 16)
-    owner = np.repeat(np.arange(len(block_rows)), np.diff(link_start))
-    polygons = np.bincount(owner[tables.polygon >= 0], minlength=len(block_rows))
+    packed, polygons, owner = _layout(tables)
     header = start + np.concatenate([[0], np.cumsum(1 + packed + polygons)])
     total = int(header[-1])
     if total * 16 > MAX_TABLE_FLOATS:
@@ -118,7 +133,7 @@ def appendix(emitters, start: int) -> tuple[np.ndarray, np.ndarray, int]:
 
 @jit
 def _vertex(rows, q: int, v: int):
-    return float(rows[q, 1 + 2 * v]), float(rows[q, 2 + 2 * v])
+    return np.float64(rows[q, 1 + 2 * v]), np.float64(rows[q, 2 + 2 * v])
 
 
 @jit
@@ -168,8 +183,8 @@ def block_density(rows, h: int, r: int, c: int) -> float:
     columns = int(rows[h, COLUMNS])
     row_cdf = int(rows[h, ROW_CDF]) + r
     column_cdf = int(rows[h, COLUMN_CDF]) + r * (columns + 1) + c
-    p = ((float(flat[row_cdf + 1]) - float(flat[row_cdf]))
-         * (float(flat[column_cdf + 1]) - float(flat[column_cdf])))
+    p = ((np.float64(flat[row_cdf + 1]) - np.float64(flat[row_cdf]))
+         * (np.float64(flat[column_cdf + 1]) - np.float64(flat[column_cdf])))
     q = int(flat[int(rows[h, LINKS]) + r * columns + c])
     if q < 0 or not p > 0.0:
         return p
@@ -179,17 +194,17 @@ def block_density(rows, h: int, r: int, c: int) -> float:
 
 @jit
 def _edges(rows, k: int):
-    v0 = (float(rows[k, V0]), float(rows[k, V0 + 1]), float(rows[k, V0 + 2]))
-    e1 = (rows[k, V1] - v0[0], rows[k, V1 + 1] - v0[1], rows[k, V1 + 2] - v0[2])
-    e2 = (rows[k, V2] - v0[0], rows[k, V2 + 1] - v0[1], rows[k, V2 + 2] - v0[2])
-    return v0, (float(e1[0]), float(e1[1]), float(e1[2])), (float(e2[0]), float(e2[1]), float(e2[2]))
+    v0 = (np.float64(rows[k, V0]), np.float64(rows[k, V0 + 1]), np.float64(rows[k, V0 + 2]))
+    e1 = (np.float64(rows[k, V1]) - v0[0], np.float64(rows[k, V1 + 1]) - v0[1], np.float64(rows[k, V1 + 2]) - v0[2])
+    e2 = (np.float64(rows[k, V2]) - v0[0], np.float64(rows[k, V2 + 1]) - v0[1], np.float64(rows[k, V2 + 2]) - v0[2])
+    return v0, e1, e2
 
 
 @jit
 def _grid(rows, h: int):
     """``(ox, oy, m00, m01, m10, m11)``: g = origin + M (b1, b2)."""
-    return (float(rows[h, ORIGIN]), float(rows[h, ORIGIN + 1]), float(rows[h, TO_GRID]),
-            float(rows[h, TO_GRID + 1]), float(rows[h, TO_GRID + 2]), float(rows[h, TO_GRID + 3]))
+    return (np.float64(rows[h, ORIGIN]), np.float64(rows[h, ORIGIN + 1]), np.float64(rows[h, TO_GRID]),
+            np.float64(rows[h, TO_GRID + 1]), np.float64(rows[h, TO_GRID + 2]), np.float64(rows[h, TO_GRID + 3]))
 
 
 @jit
@@ -214,7 +229,7 @@ def _toward(rows, k: int, x, y, p_area: float):
     cos_light = -(rows[k, NORMAL] * wi[0] + rows[k, NORMAL + 1] * wi[1] + rows[k, NORMAL + 2] * wi[2])
     if cos_light <= 0.0:  # front side only
         return wi, d, (0.0, 0.0, 0.0), 0.0
-    le = (float(rows[k, EMISSION]), float(rows[k, EMISSION + 1]), float(rows[k, EMISSION + 2]))
+    le = (np.float64(rows[k, EMISSION]), np.float64(rows[k, EMISSION + 1]), np.float64(rows[k, EMISSION + 2]))
     return wi, d, le, p_area * d2 / cos_light
 
 
