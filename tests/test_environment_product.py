@@ -172,6 +172,10 @@ def test_strategies_that_take_product_sampling():
         assert "product-environment" in strategy.slug and "product environment" in strategy.label
 
 
+# CI budget (41 s, mostly compiling four feature sets): runs with -m slow; in every run the
+# stability suite's product columns test light and MIS with product sampling for bias on its
+# three environment cases.
+@pytest.mark.slow
 def test_product_sampling_estimates_the_same_image(tmp_path):
     """Under the shipped sky map (a hot sun, turned and scaled) with an area light, over diffuse,
     rough-conductor and plastic surfaces, light sampling, MIS and RIS (light and BSDF candidates)
