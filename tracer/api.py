@@ -84,7 +84,9 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
     """Render ``scene`` (a :class:`Scene`, or a path or dict for :func:`load_scene`) with
     ``spp`` samples per pixel.
 
-    strategy : ``uniform``, ``cosine``, ``bsdf``, ``light``, ``mis`` or ``ris``, or a
+    strategy : ``uniform``, ``cosine``, ``bsdf``, ``light``, ``mis``, ``ris`` or ``auto`` (the
+        one of light, bsdf and mis, with the light sampling and selection, that a pilot measures
+        most efficient on the scene: ``tracer.auto``; the image's record says which), or a
         :class:`Strategy` (then the keyword options heuristic ... ris_sources are ignored).
     light_selection : ``power``, ``uniform`` or ``bvh`` (a light BVH: by an importance bound at
         the shading point; pays with many lights).
@@ -111,7 +113,8 @@ def render(scene: Scene | str | os.PathLike[str] | dict[str, Any], strategy: str
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     if not isinstance(strategy, Strategy):
-        sampling = light_sampling if light_sampling is not None else \
+        # auto chooses the light sampling itself: a scene's [render] light_sampling is not for it.
+        sampling = light_sampling if light_sampling is not None or strategy == "auto" else \
             scene.render_defaults.get("light_sampling", DEFAULT_LIGHT_SAMPLING)
         strategy = Strategy.from_options(strategy, heuristic=heuristic, light_samples=light_samples,
                                          bsdf_samples=bsdf_samples, one_sample=one_sample,

@@ -710,8 +710,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     scene_path = scene_mod.resolve_scene(args.scene) if args.scene else scene_mod.default_scene_path()
     scene = scene_mod.load_scene(scene_path, args.width, args.height, parameters=_parameters(args))
     defaults = scene.render_defaults
-    strategy = _strategy_from(args, args.strategy or defaults.get("strategy", "mis"),
-                              args.light_sampling or defaults.get("light_sampling"))
+    name = args.strategy or defaults.get("strategy", "mis")
+    # auto chooses the light sampling itself: a scene's [render] light_sampling is not for it.
+    strategy = _strategy_from(args, name, args.light_sampling or (defaults.get("light_sampling")
+                                                                  if name != "auto" else None))
     spp = args.spp or defaults.get("spp", 64)
     sampler = args.sampler or defaults.get("sampler", DEFAULT_SAMPLER)
     # The default name tells settings apart (mis_balance, light_x4, sobol, seed 5), so that
@@ -785,9 +787,9 @@ def cmd_reference(args: argparse.Namespace) -> int:
     if args.task_spp is not None and not on_cluster:
         raise InputError("--task-spp sizes the tasks of --workers or --scheduler", "command line")
     if on_cluster:  # before a local cluster takes seconds to start
-        from .cluster import refuse_learning
+        from .cluster import refuse_undistributable
 
-        refuse_learning(strategy, "command line")
+        refuse_undistributable(strategy, "command line")
     # The files are written before a local cluster shuts down: its shutdown takes seconds, and a
     # second Ctrl-C then must not cost the finished work.
     with _cluster(args) as client:

@@ -331,12 +331,17 @@ def _estimator(scene: Scene, strategy: Strategy) -> DirectLighting:
         return _ESTIMATORS[key]
 
 
-def refuse_learning(strategy: Strategy, where: str | None = None) -> None:
-    """``InputError`` for a strategy that learns between passes: its sample ranges depend on all
-    the samples before them, so they are not independent tasks."""
+def refuse_undistributable(strategy: Strategy, where: str | None = None) -> None:
+    """``InputError`` for a strategy whose passes are not independent tasks: one that learns
+    between passes (its sample ranges depend on all the samples before them) or ``auto`` (its
+    pilot decides, on this machine, what every task would render)."""
     if strategy.learns:
         raise InputError(f"{strategy.label} learns between passes from every earlier sample, so its passes "
                          "are not independent tasks: render it without --workers or --scheduler", where)
+    if strategy.name == "auto":
+        raise InputError("auto's pilot chooses its strategy on this machine before any sample is drawn: render "
+                         "it without --workers or --scheduler, or distribute the strategy it chose (the render "
+                         "record's tracer:strategy and tracer:auto say which)", where)
 
 
 # What a task of a distributed render gives back: its film, the count of samples that were not
@@ -402,7 +407,7 @@ def render_distributed(client, scene: Scene, strategy: Strategy, settings: Rende
     and its record lists their sample ranges. Strategies that learn between passes (optimal MIS,
     adaptive allocation) are refused: each pass depends on all the samples before it.
     """
-    refuse_learning(strategy)
+    refuse_undistributable(strategy)
     fresh = film is None
     film, earlier = film_to_fill(scene, strategy, settings, film)
     pixels = scene.camera.width * scene.camera.height

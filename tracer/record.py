@@ -92,6 +92,9 @@ class RenderRecord:
     seconds : rendering wall time, summed over the runs pooled into the film.
     scene : the scene file's path (informative only).   scene_digest : ``Scene.digest``.
     version : tracer's version.
+    auto : for a render of ``--strategy auto``, what its pilot measured (``tracer.auto.Choice.
+        summary``: each candidate's efficiency relative to the strategy above, which it chose);
+        None otherwise. Informative: renders pool by the strategy they ran.
     """
 
     strategy: str | None = None
@@ -109,6 +112,7 @@ class RenderRecord:
     scene: str | None = None
     scene_digest: str | None = None
     version: str | None = None
+    auto: str | None = None
 
     @classmethod
     def of_render(cls, strategy: Any, sampler: str, seed: int, first_sample: int, spp: int,

@@ -24,11 +24,11 @@ import time
 from collections import deque
 from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import interrupts, merge_tree, samplers, tuning
+from . import auto, interrupts, merge_tree, samplers, tuning
 from .errors import InputError
 from .estimator import DirectLighting
 from .film import Film
@@ -246,6 +246,9 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     ``interrupts.check`` between batches (``tracer.interrupts``).
     """
     cam = scene.camera
+    choice, pilot_seconds = None, 0.0
+    if estimator is None and strategy.name == "auto":
+        strategy, estimator, choice, pilot_seconds = _resolve_auto(scene, strategy, settings, film, progress)
     runs = estimator.strategy if estimator is not None else strategy
     fresh = film is None  # then the pool of the new samples becomes the film
     film, earlier = film_to_fill(scene, runs, settings, film)
@@ -309,10 +312,10 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         # One executor whatever the thread count: one thread is a pool of one.
         with ThreadPoolExecutor(max_workers=threads) as pool:
             interrupted = _run_pipelined(pool, threads, batches, estimator, sampler, merge, hook)
-        seconds = time.perf_counter() - start
+        seconds = time.perf_counter() - start + pilot_seconds
     except KeyboardInterrupt:
         interrupted = True
-        seconds = time.perf_counter() - start
+        seconds = time.perf_counter() - start + pilot_seconds
     finally:
         close_quietly(bar)
     if interrupted:
@@ -328,12 +331,43 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     elif pooled is not None:
         film.merge(pooled)
     film.record = _record(scene, runs, settings, first, drawn, seconds, earlier)
+    if choice is not None or (earlier is not None and earlier.auto):
+        film.record = replace(film.record, auto=choice.summary() if choice else earlier.auto)
     learner = hook.learner if hook is not None else (learner if runs.learns else None)
     if learner is not None:
         film.learned = learner.maps()
     new_first = settings.first_sample + first
     added = ((settings.seed, new_first, new_first + drawn),) if drawn else ()
     return RenderResult(film, seconds, samples, nonfinite, interrupted, learner, added)
+
+
+def _resolve_auto(scene: Scene, auto_strategy: Strategy, settings: RenderSettings, film: Film | None,
+                  progress: bool) -> tuple[Strategy, DirectLighting, "auto.Choice | None", float]:
+    """The strategy a render of ``--strategy auto`` runs (``tracer.auto``), its estimator, the
+    pilot's choice (None when ``film`` holds an earlier ``auto`` render, whose strategy the new
+    samples continue) and the pilot's seconds. Candidates compile before the pilot starts, as
+    every render's kernels compile off its clock."""
+    if film is not None and bool(film.count.any()) and film.record.auto:
+        try:
+            chosen = Strategy.from_record(film.record)
+        except ValueError as exc:
+            raise InputError(f"the film's record names no strategy to continue: {exc}") from None
+        return chosen, DirectLighting(scene, chosen), None, 0.0
+    try:
+        candidates = auto.candidates(scene, auto_strategy)
+    except ValueError as exc:
+        raise InputError(f"{scene.path}: {exc}") from None
+    estimators = {s: DirectLighting(scene, s) for s in candidates}
+    pilot = samplers.make("independent", 0)
+    with interrupts.deferred("tracer: interrupted; stopping as soon as the kernels are compiled"
+                             if progress else None) as arrived:
+        for estimator in estimators.values():
+            estimator.compile(pilot, progress)
+    if arrived:
+        raise KeyboardInterrupt
+    say = (lambda text: print(f"tracer: {text}", file=sys.stderr)) if progress else None
+    choice = auto.choose(scene, auto_strategy, settings.seed, estimators, say, max(1, settings.threads))
+    return choice.strategy, estimators[choice.strategy], choice, choice.seconds
 
 
 def _check_part(tree: merge_tree.Layout, settings: RenderSettings, part: merge_tree.Task,

@@ -17,6 +17,8 @@ bsdf       0               M                  the material's own sampling
 light      N               0                  -
 mis        N               M                  the material's, weighted by MIS
 ris        N candidates    M candidates       the material's; one candidate kept
+auto       one of light, bsdf and mis with these counts, the light sampling and selection
+           that a pilot measures most efficient on the scene (``tracer.auto``)
 =========  ==============  =================  ===============================
 """
 
@@ -24,7 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-STRATEGIES = ("uniform", "cosine", "bsdf", "light", "mis", "ris")
+STRATEGIES = ("uniform", "cosine", "bsdf", "light", "mis", "ris", "auto")
 # What ``compare`` runs when no strategies are named: the five classic ones (``ris`` is asked for).
 CLASSIC_STRATEGIES = STRATEGIES[:5]
 HEURISTICS = ("balance", "power", "max", "optimal")
@@ -64,6 +66,8 @@ STRATEGY_DOCS = {
            "samples or one of the two at random (--one-sample)",
     "ris": "resampled importance sampling: M candidates weighed by their unshadowed contribution, "
            "one kept, one shadow ray",
+    "auto": "the most efficient of light, bsdf and mis (each light sampling and selection) on the scene, "
+            "by a pilot's relMSE x cost per sample; the render record says what it chose",
 }
 HEURISTIC_DOCS = {
     "balance": "w_i = n_i p_i / sum_k n_k p_k (Veach 1997)",
@@ -189,6 +193,14 @@ class Strategy:
             raise ValueError("compensated environment sampling leaves the map's cells below its mean to BSDF "
                              "samples: it needs mis, or ris with BSDF candidates (light sampling alone would "
                              "miss their light)")
+        if self.name == "auto" and (self.light_sampling, self.light_selection, self.allocation, self.one_sample) \
+                != (DEFAULT_LIGHT_SAMPLING, DEFAULT_LIGHT_SELECTION, "fixed", False):
+            raise ValueError("auto chooses the light sampling and light selection itself, with fixed counts and "
+                             "multi-sample MIS: give it none of --light-sampling, --light-selection, "
+                             "--allocation, --one-sample")
+        if self.name == "auto" and self.heuristic == "optimal":
+            raise ValueError("auto chooses among fixed strategies: the optimal heuristic learns between passes "
+                             "(use balance, power or max)")
         if self.name == "ris" and self.heuristic == "optimal" and self.bsdf_samples:
             raise ValueError("ris cannot use the optimal heuristic: its weights may be negative, and ris "
                              "resamples in proportion to them (use balance, power or max)")
@@ -211,6 +223,10 @@ class Strategy:
     @property
     def label(self) -> str:
         """A short description such as ``mis (power, 1 light + 1 bsdf)``."""
+        if self.name == "auto":
+            counts = "" if (self.light_samples, self.bsdf_samples) == (1, 1) else \
+                f", {self.light_samples} light + {self.bsdf_samples} bsdf"
+            return f"auto ({self.heuristic}{counts})" if self.heuristic != DEFAULT_HEURISTIC or counts else "auto"
         picked = {"uniform": ", lights picked uniformly", "bvh": ", lights picked by BVH"}
         selection = picked.get(self.light_selection, "") if self.light_count else ""
         if self.light_count and self.light_sampling != DEFAULT_LIGHT_SAMPLING:
@@ -241,7 +257,7 @@ class Strategy:
         if self.name == "ris":
             parts = [self.name, f"l{self.light_samples}_b{self.bsdf_samples}" if self.bsdf_samples
                      else f"m{self.light_samples}"]
-        elif self.name == "mis":
+        elif self.name in ("mis", "auto"):
             parts = [self.name] + ([] if (self.light_samples, self.bsdf_samples) == (1, 1)
                                    else [f"l{self.light_samples}_b{self.bsdf_samples}"])
             if self.one_sample:
@@ -311,7 +327,7 @@ class Strategy:
     @property
     def light_count(self) -> int:
         """Light samples per camera sample that this strategy takes (0 if it takes none)."""
-        return self.light_samples if self.name in ("light", "mis", "ris") else 0
+        return self.light_samples if self.name in ("light", "mis", "ris", "auto") else 0
 
     @property
     def direction_count(self) -> int:
@@ -326,7 +342,8 @@ class Strategy:
     @property
     def recorded_heuristic(self) -> str:
         """The heuristic as records and reports state it: ``none`` unless the strategy is mis."""
-        return self.heuristic if self.name == "mis" or (self.name == "ris" and self.bsdf_samples) else "none"
+        return self.heuristic if self.name in ("mis", "auto") or (self.name == "ris" and self.bsdf_samples) \
+            else "none"
 
     @property
     def recorded_light_sampling(self) -> str:

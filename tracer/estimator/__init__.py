@@ -71,6 +71,8 @@ class DirectLighting:
     """The estimator for one scene and strategy, shared by all render threads (read-only)."""
 
     def __init__(self, scene: Scene, strategy: Strategy, caster: RayCaster | None = None):
+        if strategy.name == "auto":
+            raise ValueError("auto is a choice among strategies, not one: tracer.auto.choose makes it")
         self.scene = scene
         self.strategy = strategy
         self.rays = SceneRays(scene, caster)
@@ -177,12 +179,14 @@ class DirectLighting:
 
     def shade_lanes(self, origins: np.ndarray, dirs: np.ndarray, sampler: samplers.SamplerParams,
                     pixel: np.ndarray, sample: np.ndarray,
-                    tuned: Tuning | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    tuned: Tuning | None = None,
+                    rays: list | None = None) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`radiance` for the render loop: float32 rays, a built sampler, int64 lanes,
         and what the pass applies (``tracer.tuning``; None: the pilot's settings). Returns the
         radiance ``(n, 3)`` (for optimal MIS, the balance estimate V, to which the render loop
         adds a C) and the lane statistics ``(n, tuning.LANE_COLUMNS)`` ((0, ...) unless the
-        estimator learns)."""
+        estimator learns). ``rays``, if given, has (shadow rays, direction rays) the lanes cast
+        appended: the counts ``tracer.auto`` prices a strategy by."""
         made = self.build(sampler)
         tuned = tuned if tuned is not None else tuning.no_tuning()
         out = self.outputs(len(origins), tuned)
@@ -214,6 +218,8 @@ class DirectLighting:
                 self.cutouts.direction(found, direction.origin[d], direction.dir[d], direction.value[d])
         made.function(estimator_kernels.gather)(radiance, self.surfaces, tables, self.plan, tuned, shadow,
                                                 blocked, direction, found, lane_stats)
+        if rays is not None:
+            rays.append((int(n_shadow), int(n_direction)))
         return radiance, lane_stats
 
     def compile(self, sampler: samplers.SamplerParams, progress: bool = False) -> float:

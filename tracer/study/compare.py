@@ -200,8 +200,17 @@ class Comparison:
         self._warm: set[Strategy] = set()
         self.token = uuid.uuid4().hex  # names this comparison to the workers that keep a copy of it
 
-    def _estimator(self, strategy: Strategy) -> DirectLighting:
-        return DirectLighting(self.scene, strategy, self.caster)
+    def _estimator(self, strategy: Strategy) -> DirectLighting | None:
+        """The estimator of ``strategy``; None for ``auto``, which ``render()`` resolves by its
+        pilot (on the clock) and later passes continue (:meth:`_continued`)."""
+        return None if strategy.name == "auto" else DirectLighting(self.scene, strategy, self.caster)
+
+    def _continued(self, estimator: DirectLighting | None, result: RenderResult) -> DirectLighting | None:
+        """The estimator for the passes after ``result``: for ``auto``, the strategy its pilot
+        chose (its film's record), built once instead of at every pass."""
+        if estimator is None and result.film.record.auto:
+            return self._estimator(Strategy.from_record(result.film.record))
+        return estimator
 
     def _say(self, text: str) -> None:
         if self.progress:
@@ -216,7 +225,7 @@ class Comparison:
         tiny = copy.copy(self.scene)
         tiny.camera = dataclasses.replace(self.scene.camera, width=1, height=1)
         render_complete(tiny, strategy, RenderSettings(spp=1, seed=self.seed, threads=1),
-                        estimator=DirectLighting(tiny, strategy, self.caster))
+                        estimator=None if strategy.name == "auto" else DirectLighting(tiny, strategy, self.caster))
         self._warm.add(strategy)
 
     def _render(self, strategy: Strategy, settings: RenderSettings, film: Film | None,
@@ -289,6 +298,7 @@ class Comparison:
             settings = RenderSettings(spp=chunk, seed=self.seed, threads=self.threads, first_sample=spp,
                                       sampler=sampler)
             result, seconds, chunk_cpu = self._render(strategy, settings, film, estimator, continues=result)
+            estimator = self._continued(estimator, result)
             film, spp = result.film, spp + chunk
             spent += seconds
             wall += result.seconds
@@ -320,6 +330,7 @@ class Comparison:
             settings = RenderSettings(spp=target - spp, seed=seed, threads=self.threads, first_sample=spp,
                                       sampler=sampler)
             result, seconds, _ = self._render(strategy, settings, film, estimator, continues=result)
+            estimator = self._continued(estimator, result)
             film, spp = result.film, target
             spent += seconds
             rel = metrics.relmse(film.mean, self.reference.mean, self.reference_variance)

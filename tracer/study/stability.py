@@ -182,6 +182,7 @@ class Cell:
     blind: bool
     testable: bool
     zero: bool
+    chose: str = ""  # the auto column: the strategy its pilot chose (``Strategy.slug``)
 
 
 def _image_mean_z(film: Film, reference: Film) -> float:
@@ -215,6 +216,9 @@ def run_case(
                                  environment_sampling=environment)
         result = render_complete(scene, strategy, settings)
         film = result.film
+        chose = Strategy.from_record(film.record) if name == "auto" else None
+        # auto is as testable as the strategy it chose (its image is that strategy's render).
+        tested = chose.name if chose is not None else name
         cells.append(
             Cell(
                 case=case.name,
@@ -226,8 +230,9 @@ def run_case(
                 mean=film.mean.mean(axis=0).tolist(),
                 reference_mean=reference.mean.mean(axis=0).tolist(),
                 blind=name in case.blind,
-                testable=name in case.testable and name not in case.blind and column not in case.untestable,
+                testable=tested in case.testable and tested not in case.blind and column not in case.untestable,
                 zero=bool(np.all(film.mean == 0.0)),
+                chose=chose.slug if chose is not None else "",
             )
         )
     return cells

@@ -1,0 +1,292 @@
+"""``auto``: the strategy a pilot measures most efficient on the scene at hand.
+
+A user who asks for ``--strategy auto`` gets one of the fixed strategies tracer has, chosen for
+the scene by estimated efficiency 1 / (relMSE per sample x cost per sample), as Grittmann et al.
+(2022, "Efficiency-aware multiple importance sampling for bidirectional rendering algorithms")
+choose among technique combinations by variance and cost measured together.
+
+**Candidates** (:func:`candidates`). From the strategy the user gave as a template (its counts
+N, M, heuristic and environment sampling): ``mis`` (N light + M BSDF samples) and ``light`` (N)
+for every light sampling whose techniques differ on this scene (``area``, ``solid-angle``,
+``solid-angle-cos``: on a scene of triangles only, the last two are the same technique) and
+every light selection worth trying (``power``; ``bvh`` too from ``BVH_MIN_LIGHTS`` lights), and
+``bsdf`` (M). Only strategies that see all of the scene's light are candidates, so that
+whatever the pilot chooses estimates the same image: without light samples a point, spot or
+directional light is never reached, and without direction samples a delta lobe (a mirror, glass,
+a smooth coating) never reflects an emitter (``light`` is dropped where a material has one).
+
+**Pilot** (:func:`choose`). Each candidate renders ``PILOT_SPP`` samples of up to
+``PILOT_PIXELS`` pixels (a regular lattice over the image) with a seed of its own, derived from
+the render's, so that no random number of the render decides the choice: the render that
+follows is a fixed strategy whose samples are independent of the choice, and so unbiased
+whatever was chosen. The pilot's samples are not kept. Its relMSE per sample is the mean over
+those pixels and the channels of s^2 / (m^2 + 0.01), with s^2 the candidate's sample variance
+and m the pixel's mean over all candidates (each is unbiased; their mean is the steadiest value
+to normalize by), the measure ``tracer compare`` reports (``study.metrics.relmse``); or, where
+the candidate disagrees with the others by more than its own spread explains (it never sampled
+what carries the light), the relMSE that disagreement implies (:func:`relmse_estimates`).
+
+**Cost**, deterministic (a seed gives the same choice on any machine and under any load), in
+units of one shadow ray (``COSTS``): a camera sample's ray and the shading of its hit, one
+shading per light or direction sample, the shadow and direction rays the pilot actually cast
+(a light sample below the horizon casts none, nor does a direction that can reach no emitter),
+and what a light technique or the light BVH adds per sample. The weights were measured on this
+project's machine (``benchmarks/auto_costs.py``: seconds per lane of each candidate on seven
+scenes, fitted by least squares with one time per ray for each scene; it reports how well the
+model fits). What the model cannot know is how much dearer a ray is in one scene's geometry
+than another's: that scales every candidate of a scene alike, except that shadow rays (any hit
+ends them) and direction rays (the closest hit) differ by a factor that varies by scene.
+
+The choice is made once per render, for the whole image: MIS already adapts per pixel between
+its techniques, and a choice per tile would need the film to fold tiles of different
+strategies (left for later; the render record would have to say which tile took which).
+Compilation stays off the clock as for every strategy (``render_loop._compile``); the pilot is
+on it: a render's seconds include its pilot.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import samplers
+from .scene import Scene
+from .strategy import Strategy, light_samplings
+
+PILOT_PIXELS = 4096  # pixels of the pilot lattice (all of them in a smaller image)
+PILOT_SPP = 8  # samples per pilot pixel and candidate
+# From this many light candidates the light BVH is tried as well as power selection.
+BVH_MIN_LIGHTS = 8
+# The relMSE's epsilon (``study.metrics.RELMSE_EPSILON``): relative error of dark pixels.
+EPSILON = 0.01
+# A pilot's seed: the render's, mixed with this (splitmix-style) so that the pilot's random
+# numbers are none of the render's.
+PILOT_SALT = 0x9E3779B97F4A7C15
+
+# Weight of each kind of work in the cost of a camera sample, in units of one shadow ray, fitted
+# by benchmarks/auto_costs.py to the seconds per lane of every candidate on 7 scenes (69 pairs;
+# the model's median error 6.5%, largest 43%: results/auto_costs.json).
+COSTS = {
+    "camera": 1.76,           # a camera sample: its ray (a closest hit) and the shading of its hit
+    "shading": 0.84,          # evaluating a light or direction sample (BSDF, pdfs, MIS weight)
+    "shadow_ray": 1.0,        # an occlusion ray (the unit: 67-144 ns on the 7 scenes)
+    "direction_ray": 3.62,    # a direction sample's closest-hit ray, the emitter it meets, its MIS pdf
+    "solid-angle": 0.75,      # a solid-angle light sample (spherical rectangle / triangle, cone)
+    "solid-angle-cos": 0.95,  # its cosine-warped variant
+    "bvh": 4.77,              # a light BVH descent (per light sample, and per MIS direction ray)
+}
+
+
+@dataclass(frozen=True)
+class Measured:
+    """One candidate's pilot: relMSE of one sample per pixel, cost of one camera sample
+    (``COSTS``'s units) and efficiency 1 / (relmse x cost) (inf where the pilot saw no error)."""
+
+    strategy: Strategy
+    relmse: float
+    cost: float
+
+    @property
+    def efficiency(self) -> float:
+        return math.inf if self.relmse <= 0.0 else 1.0 / (self.relmse * self.cost)
+
+
+@dataclass(frozen=True)
+class Choice:
+    """What the pilot chose and what it measured (best first), and its wall seconds."""
+
+    strategy: Strategy
+    measured: tuple[Measured, ...]
+    seconds: float
+
+    def summary(self) -> str:
+        """One line for the render record and the command line: each candidate's slug and its
+        efficiency relative to the chosen one's, ``mis_solid-angle 1; mis 0.81; light 0.4``."""
+        best = self.measured[0].efficiency
+        parts = []
+        for m in self.measured:
+            ratio = 1.0 if math.isinf(best) and math.isinf(m.efficiency) else m.efficiency / best
+            parts.append(f"{m.strategy.slug} {ratio:.3g}")
+        return "; ".join(parts)
+
+
+def template(strategy: Strategy) -> dict[str, object]:
+    """What of an ``auto`` strategy its candidates keep: counts, heuristic, environment sampling."""
+    return {"heuristic": strategy.heuristic, "environment_sampling": strategy.environment_sampling}
+
+
+def _has_delta_lights(scene: Scene) -> bool:
+    from .lights import emitters
+
+    return len(emitters.points(scene)) + len(emitters.directionals(scene)) > 0
+
+
+def _has_delta_lobes(scene: Scene) -> bool:
+    from . import plugins
+    from .materials.base import DELTA
+
+    types = plugins.by_code("material")
+    return any(types[int(k)].lobes & DELTA for k in set(scene.materials.kind.tolist()) if int(k) in types)
+
+
+def candidates(scene: Scene, auto: Strategy) -> list[Strategy]:
+    """The fixed strategies ``auto`` chooses among on ``scene`` (module docstring), each seeing
+    all of the scene's light. Raises ``ValueError`` if none does (a scene of point lights seen
+    only in a mirror needs a light path of two bounces, which no direct-lighting strategy has)."""
+    from .lights import LightSampler, technique_names
+
+    kept = template(auto)
+    n_light, n_dir = max(1, auto.light_samples), max(1, auto.bsdf_samples)
+    needs_light, needs_direction = _has_delta_lights(scene), _has_delta_lobes(scene)
+    out: list[Strategy] = []
+    # Each candidate as its render record gives it back (``Strategy.from_record``): what a
+    # strategy does not use left at its default, so that a continued render is the same one.
+    if not needs_light:
+        out.append(Strategy("bsdf", light_samples=0, bsdf_samples=n_dir))
+    seen: set[tuple[str, ...]] = set()
+    for sampling in light_samplings():
+        lights = LightSampler(scene, "power", sampling, auto.environment_sampling)
+        techniques = technique_names(lights.tables)
+        if techniques in seen:
+            continue
+        seen.add(techniques)
+        selections = ["power"] + (["bvh"] if len(lights.tables.technique) >= BVH_MIN_LIGHTS else [])
+        for selection in selections:
+            chosen = dict(light_sampling=sampling, light_selection=selection, **kept)
+            out.append(Strategy("mis", light_samples=n_light, bsdf_samples=n_dir, **chosen))
+            if not needs_direction:
+                out.append(Strategy("light", light_samples=n_light, bsdf_samples=0, light_sampling=sampling,
+                                    light_selection=selection, environment_sampling=auto.environment_sampling))
+    if not out:
+        raise ValueError("auto has no strategy that sees all of this scene's light")
+    return out
+
+
+def pilot_pixels(width: int, height: int, count: int = PILOT_PIXELS) -> np.ndarray:
+    """The pilot's pixels ``(n,)`` int64: all of them, or a regular lattice of about ``count``
+    (every ``stride``-th pixel of every ``stride``-th row, centred in its cell)."""
+    if width * height <= count:
+        return np.arange(width * height, dtype=np.int64)
+    stride = math.ceil(math.sqrt(width * height / count))
+    xs = np.arange(stride // 2, width, stride, dtype=np.int64)
+    ys = np.arange(stride // 2, height, stride, dtype=np.int64)
+    return (ys[:, None] * width + xs[None, :]).ravel()
+
+
+def pilot_seed(seed: int, candidate: int = 0) -> int:
+    """The seed of candidate ``candidate``'s pilot in a render of ``seed``: a 64-bit mix
+    (SplitMix64's finalizer) of the two, so that the pilots' random numbers are none of the
+    render's and the candidates' pilots are independent of each other (:func:`relmse_estimates`
+    compares them)."""
+    z = (int(seed) + PILOT_SALT * (int(candidate) + 1)) & 0xFFFFFFFFFFFFFFFF
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & 0xFFFFFFFFFFFFFFFF
+    return z ^ (z >> 31)
+
+
+def relmse_estimates(means: np.ndarray, variances: np.ndarray, spp: int) -> np.ndarray:
+    """Each candidate's relMSE per sample ``(K,)`` from its pilot's per-pixel ``means`` and
+    unbiased ``variances`` ``(K, n, 3)`` of ``spp`` independent samples each.
+
+    A candidate's own sample variance misses what its pilot never sampled: BSDF sampling of a
+    tiny light sees no light in 8 samples of every pixel, and its variance is 0. So each
+    candidate is also checked against the others: all are unbiased for the same pixels, so
+    spp x the mean over pixels of (its mean - the others' mean)^2 / (m^2 + 0.01), less what the
+    others' own noise adds to it, also estimates its relMSE per sample, without relying on its
+    having seen its rare samples (a candidate that missed the light is off by the whole light).
+    Each candidate gets the larger of the two estimates. (The candidates' pilots draw
+    independent random numbers, ``pilot_seed``, so their errors are independent.)
+    """
+    means, variances = np.asarray(means), np.asarray(variances)
+    count = len(means)
+    pooled = means.mean(axis=0)
+    scale = 1.0 / (pooled * pooled + EPSILON)
+    spread = (variances * scale).mean(axis=(1, 2))
+    if count < 2:
+        return spread
+    total = means.sum(axis=0)
+    out = np.empty(count)
+    for c in range(count):
+        others = (total - means[c]) / (count - 1)
+        deviation = spp * float(((means[c] - others) ** 2 * scale).mean())
+        # Var(others' mean) x spp = sum of their relMSEs / (count - 1)^2.
+        noise = (spread.sum() - spread[c]) / (count - 1) ** 2
+        out[c] = max(spread[c], deviation - noise)
+    return out
+
+
+def cost_per_sample(strategy: Strategy, lanes: int, shadow_rays: int, direction_rays: int) -> float:
+    """Cost of one camera sample of ``strategy`` (``COSTS``'s units) from a pilot of ``lanes``
+    camera samples that cast ``shadow_rays`` and ``direction_rays``."""
+    lanes = max(lanes, 1)
+    cost = (COSTS["camera"] + COSTS["shading"] * (strategy.light_count + strategy.direction_count)
+            + COSTS["shadow_ray"] * shadow_rays / lanes + COSTS["direction_ray"] * direction_rays / lanes)
+    if strategy.light_count:
+        cost += strategy.light_count * COSTS.get(strategy.light_sampling, 0.0)
+        if strategy.light_selection == "bvh":
+            # A light sample descends the tree; an MIS direction ray asks it for the pmf of the
+            # light it meets (counted per direction ray: a bound).
+            cost += COSTS["bvh"] * (strategy.light_count + direction_rays / lanes)
+    return cost
+
+
+def measure(scene: Scene, strategy: Strategy, pixel_set: np.ndarray, seed: int, estimator=None,
+            spp: int = PILOT_SPP) -> tuple[np.ndarray, np.ndarray, float]:
+    """Render ``spp`` samples of each pixel of ``pixel_set`` with ``strategy`` (independent
+    sampler, ``seed``): per-pixel mean and unbiased variance ``(n, 3)`` each, and the cost of a
+    camera sample (:func:`cost_per_sample`)."""
+    from .estimator import DirectLighting
+
+    estimator = estimator if estimator is not None else DirectLighting(scene, strategy)
+    sampler = samplers.make("independent", seed, 0, spp)
+    pixel = np.repeat(pixel_set, spp)
+    sample = np.tile(np.arange(spp, dtype=np.int64), len(pixel_set))
+    rays: list[tuple[int, int]] = []
+    origins, dirs = estimator.camera_rays(sampler, pixel, sample)
+    radiance = estimator.shade_lanes(origins, dirs, sampler, pixel, sample, rays=rays)[0]
+    radiance = np.where(np.isfinite(radiance), radiance, 0.0).reshape(len(pixel_set), spp, 3)
+    shadow = sum(r[0] for r in rays)
+    direction = sum(r[1] for r in rays)
+    return (radiance.mean(axis=1), radiance.var(axis=1, ddof=1),
+            cost_per_sample(strategy, len(pixel), shadow, direction))
+
+
+def choose(scene: Scene, auto: Strategy, seed: int, estimators: dict | None = None,
+           say=None, threads: int = 1) -> Choice:
+    """Run the pilot of every candidate (module docstring), ``threads`` at once, and return the
+    most efficient. ``estimators`` (strategy -> ``DirectLighting``, built and compiled by the
+    caller) are used where given; ``say(text)`` reports what was chosen."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    start = time.perf_counter()
+    strategies = candidates(scene, auto)
+    pixel_set = pilot_pixels(scene.camera.width, scene.camera.height)
+    spp = PILOT_SPP
+    with ThreadPoolExecutor(max_workers=max(1, threads)) as pool:
+        # Each candidate's pilot is one batch; Embree and the kernels release the GIL.
+        runs = list(pool.map(lambda i: measure(scene, strategies[i], pixel_set, pilot_seed(seed, i),
+                                               (estimators or {}).get(strategies[i]), spp),
+                             range(len(strategies))))
+    means, variances, costs = zip(*runs)
+    relmse = relmse_estimates(np.array(means), np.array(variances), spp)
+    measured = [Measured(s, float(r), c) for s, r, c in zip(strategies, relmse, costs)]
+    # Ties (a scene every candidate renders without noise) go to the candidate listed first.
+    order = sorted(range(len(measured)), key=lambda i: (-measured[i].efficiency, i))
+    ranked = tuple(measured[i] for i in order)
+    choice = Choice(ranked[0].strategy, ranked, time.perf_counter() - start)
+    if say is not None:
+        say(f"auto: {choice.strategy.label} (pilot of {len(strategies)} strategies x {len(pixel_set)} pixels "
+            f"x {spp} spp, {choice.seconds:.2f} s; efficiency relative to it: {choice.summary()})")
+    return choice
+
+
+def chosen_strategy(recorded, auto: Strategy) -> Strategy | None:
+    """The strategy an earlier ``auto`` render chose, from its record (``tracer.record``), for a
+    render that adds samples to it; None if the record is not of an ``auto`` render."""
+    if recorded is None or getattr(recorded, "auto", None) is None:
+        return None
+    return Strategy.from_record(recorded)
+
