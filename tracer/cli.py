@@ -676,7 +676,12 @@ def _finish(result, scene, strategy, output: Path, asked_spp: int, quiet: bool, 
         note = (f" (interrupted, {asked_spp} spp were asked: every pixel holds {film.spp} spp or more, "
                 f"up to {int(film.count.max())}; kept samples {format_ranges(result.drawn)} as "
                 "seed:first-last)") if result.interrupted else ""
-        print(f"{scene.name}: {film.width}x{film.height}, {film.spp} spp, {strategy.label}{note}: "
+        label = strategy.label
+        if film.record.auto:  # what auto chose: the strategy the file's record names
+            from .strategy import Strategy
+
+            label = f"auto -> {Strategy.from_record(film.record).label}"
+        print(f"{scene.name}: {film.width}x{film.height}, {film.spp} spp, {label}{note}: "
               f"{result.seconds:.2f} s, {rate / 1e6:.2f} M samples/s -> {output}, {png}",
               file=sys.stderr)
     return EXIT_INTERRUPTED if result.interrupted else 0
