@@ -52,6 +52,14 @@ def measure(scene, reference, strategy, seeds: list[int], spp: int, seconds: flo
     return row
 
 
+def write_results(folder: Path, name: str, doc: dict, markdown: str) -> None:
+    """``folder/name.json`` (``doc``) and ``folder/name.md`` (``markdown``, also printed)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{name}.json").write_text(json.dumps(doc, indent=1) + "\n")
+    (folder / f"{name}.md").write_text(markdown)
+    print(markdown)
+
+
 def mitsuba_child(python: str, script: str | Path, spec: dict) -> dict:
     """Run ``script --mitsuba-child SPEC`` with Mitsuba's interpreter ``python`` and return the
     JSON its last line prints; RuntimeError with its stderr's tail if it fails."""

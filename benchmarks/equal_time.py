@@ -38,7 +38,6 @@ OUT/equal_time.md.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import sys
@@ -51,6 +50,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
+from efficiency_runs import write_results  # noqa: E402  (benchmarks/ is no package)
 
 CORPUS = {
     "cbox": "cbox/scenes/cbox/cbox-rgb.xml",
@@ -178,19 +178,6 @@ def scene_files(args, folder: Path) -> dict[str, Path]:
     return files
 
 
-def sees_all_light(scene, strategy) -> bool:
-    """Whether ``strategy`` reaches every light of ``scene`` (``tracer.auto``'s rule)."""
-    from tracer import auto
-
-    if strategy.name == "auto":
-        return True
-    if not strategy.direction_count and auto._has_delta_lobes(scene):
-        return False
-    if not strategy.light_count and auto._has_delta_lights(scene):
-        return False
-    return True
-
-
 def ratio_interval(ours: list[float], base: list[float]) -> tuple[float, float, float]:
     """Geometric mean of ours / base over seeds and its 95% t-interval (log scale)."""
     from scipy import stats
@@ -253,6 +240,7 @@ def main() -> int:
         args.scene_seed = int(time.time() * 1000) % 2**31
     print(f"equal_time: scene seed {args.scene_seed}", file=sys.stderr)
 
+    from tracer import auto
     from tracer.render_loop import RenderSettings, render_complete
     from tracer.scene import load_scene
     from tracer.strategy import Strategy
@@ -277,7 +265,7 @@ def main() -> int:
             for name, (scene, reference) in scenes.items():
                 comparison = Comparison(scene, reference, seed, 2)
                 for label, strategy, sampler in strategies():
-                    if not sees_all_light(scene, strategy):
+                    if not auto.sees_all_light(scene, strategy):
                         continue
                     run = comparison.equal_time(strategy, args.time, sampler)
                     rel = metrics.relmse(run.film.mean, reference.mean, reference.variance_of_mean())
@@ -304,11 +292,7 @@ def main() -> int:
            "command": "python " + " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
            "strategies": [(label, s.slug, sampler) for label, s, sampler in strategies()],
            "results": results}
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "equal_time.json").write_text(json.dumps(doc, indent=1) + "\n")
-    (out / "equal_time.md").write_text(markdown(doc))
-    print(markdown(doc))
+    write_results(Path(args.out), "equal_time", doc, markdown(doc))
     return 0
 
 

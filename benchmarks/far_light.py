@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from efficiency_runs import measure  # noqa: E402  (benchmarks/ is no package)
+from efficiency_runs import measure, write_results  # noqa: E402  (benchmarks/ is no package)
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -198,11 +198,7 @@ def main() -> int:
             results["rows"] += run_child({**spec, "samplings": list(SAMPLINGS), "far": far},
                                          folder / f"cache-{far}")
     results["load_after"] = list(os.getloadavg())
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "far_light.json").write_text(json.dumps(results, indent=2) + "\n")
-    (out / "far_light.md").write_text(markdown(results))
-    print(markdown(results))
+    write_results(Path(args.out), "far_light", results, markdown(results))
     return 0
 
 

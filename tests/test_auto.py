@@ -16,6 +16,7 @@ from tracer.render_loop import RenderSettings, render
 from tracer.scene import load_scene
 from tracer.scene.shipped import resolve_scene
 from tracer.strategy import Strategy
+from tracer.study import metrics
 from tracer.study.stability import CASE_DIR
 
 from stats import image_mean_and_se, z_critical
@@ -75,7 +76,8 @@ def test_a_candidate_that_never_saw_the_light_is_not_taken_for_noiseless():
     means = np.stack([np.ones((100, 3))] * 3 + [np.zeros((100, 3))])
     variances = np.stack([np.full((100, 3), 0.5)] * 3 + [np.zeros((100, 3))])
     relmse = auto.relmse_estimates(means, variances, spp)
-    scale = 1.0 / (0.75 ** 2 + auto.EPSILON)
+    assert auto.RELMSE_EPSILON == metrics.RELMSE_EPSILON  # the pilot measures what compare reports
+    scale = 1.0 / (0.75 ** 2 + auto.RELMSE_EPSILON)
     assert relmse[3] == pytest.approx((spp - 1.5 / 9) * scale, rel=1e-12)
     good = (spp * (1 / 3) ** 2 - 1.0 / 9) * scale  # others' mean 2/3; their noise (0.5 + 0.5) / 9
     np.testing.assert_allclose(relmse[:3], good, rtol=1e-12)
@@ -131,7 +133,6 @@ def test_auto_never_chooses_the_technique_that_cannot_find_a_tiny_light():
     scene = load_scene(CASE_DIR / "tiny_light.toml", 32, 32)
     choice = auto.choose(scene, Strategy("auto"), seed=0)
     assert choice.strategy.name != "bsdf"
-    assert choice.measured[0].efficiency >= max(m.efficiency for m in choice.measured)
 
 
 def test_auto_under_the_white_furnace_is_one(write_scene, tmp_path):

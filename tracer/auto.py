@@ -58,10 +58,11 @@ from .strategy import Strategy, light_samplings
 
 PILOT_PIXELS = 4096  # pixels of the pilot lattice (all of them in a smaller image)
 PILOT_SPP = 8  # samples per pilot pixel and candidate
+# The relMSE's epsilon, as ``study.metrics.RELMSE_EPSILON`` (which the core may not import;
+# tests/test_auto.py checks they agree): the relative error of dark pixels.
+RELMSE_EPSILON = 0.01
 # From this many light candidates the light BVH is tried as well as power selection.
 BVH_MIN_LIGHTS = 8
-# The relMSE's epsilon (``study.metrics.RELMSE_EPSILON``): relative error of dark pixels.
-EPSILON = 0.01
 # A pilot's seed: the render's, mixed with this (splitmix-style) so that the pilot's random
 # numbers are none of the render's.
 PILOT_SALT = 0x9E3779B97F4A7C15
@@ -132,6 +133,14 @@ def _has_delta_lobes(scene: Scene) -> bool:
     return any(types[int(k)].lobes & DELTA for k in set(scene.materials.kind.tolist()) if int(k) in types)
 
 
+def sees_all_light(scene: Scene, strategy: Strategy) -> bool:
+    """Whether ``strategy`` reaches all of ``scene``'s light: light samples where there are point,
+    spot or directional lights, direction samples where a material has a delta lobe."""
+    if not strategy.light_count and _has_delta_lights(scene):
+        return False
+    return bool(strategy.direction_count) or not _has_delta_lobes(scene)
+
+
 def candidates(scene: Scene, auto: Strategy) -> list[Strategy]:
     """The fixed strategies ``auto`` chooses among on ``scene`` (module docstring), each seeing
     all of the scene's light. Raises ``ValueError`` if none does (a scene of point lights seen
@@ -140,12 +149,9 @@ def candidates(scene: Scene, auto: Strategy) -> list[Strategy]:
 
     kept = template(auto)
     n_light, n_dir = max(1, auto.light_samples), max(1, auto.bsdf_samples)
-    needs_light, needs_direction = _has_delta_lights(scene), _has_delta_lobes(scene)
-    out: list[Strategy] = []
     # Each candidate as its render record gives it back (``Strategy.from_record``): what a
     # strategy does not use left at its default, so that a continued render is the same one.
-    if not needs_light:
-        out.append(Strategy("bsdf", light_samples=0, bsdf_samples=n_dir))
+    out = [Strategy("bsdf", light_samples=0, bsdf_samples=n_dir)]
     seen: set[tuple[str, ...]] = set()
     for sampling in light_samplings():
         lights = LightSampler(scene, "power", sampling, auto.environment_sampling)
@@ -157,9 +163,9 @@ def candidates(scene: Scene, auto: Strategy) -> list[Strategy]:
         for selection in selections:
             chosen = dict(light_sampling=sampling, light_selection=selection, **kept)
             out.append(Strategy("mis", light_samples=n_light, bsdf_samples=n_dir, **chosen))
-            if not needs_direction:
-                out.append(Strategy("light", light_samples=n_light, bsdf_samples=0, light_sampling=sampling,
-                                    light_selection=selection, environment_sampling=auto.environment_sampling))
+            out.append(Strategy("light", light_samples=n_light, bsdf_samples=0, light_sampling=sampling,
+                                light_selection=selection, environment_sampling=auto.environment_sampling))
+    out = [s for s in out if sees_all_light(scene, s)]
     if not out:
         raise ValueError("auto has no strategy that sees all of this scene's light")
     return out
@@ -203,7 +209,7 @@ def relmse_estimates(means: np.ndarray, variances: np.ndarray, spp: int) -> np.n
     means, variances = np.asarray(means), np.asarray(variances)
     count = len(means)
     pooled = means.mean(axis=0)
-    scale = 1.0 / (pooled * pooled + EPSILON)
+    scale = 1.0 / (pooled * pooled + RELMSE_EPSILON)
     spread = (variances * scale).mean(axis=(1, 2))
     if count < 2:
         return spread
@@ -257,12 +263,13 @@ def measure(scene: Scene, strategy: Strategy, pixel_set: np.ndarray, seed: int, 
 def choose(scene: Scene, auto: Strategy, seed: int, estimators: dict | None = None,
            say=None, threads: int = 1) -> Choice:
     """Run the pilot of every candidate (module docstring), ``threads`` at once, and return the
-    most efficient. ``estimators`` (strategy -> ``DirectLighting``, built and compiled by the
-    caller) are used where given; ``say(text)`` reports what was chosen."""
+    most efficient. ``estimators`` (each of :func:`candidates` -> its ``DirectLighting``, built
+    and compiled by the caller), if given, are the candidates; ``say(text)`` reports what was
+    chosen."""
     from concurrent.futures import ThreadPoolExecutor
 
     start = time.perf_counter()
-    strategies = candidates(scene, auto)
+    strategies = list(estimators) if estimators else candidates(scene, auto)
     pixel_set = pilot_pixels(scene.camera.width, scene.camera.height)
     spp = PILOT_SPP
     with ThreadPoolExecutor(max_workers=max(1, threads)) as pool:
@@ -281,12 +288,4 @@ def choose(scene: Scene, auto: Strategy, seed: int, estimators: dict | None = No
         say(f"auto: {choice.strategy.label} (pilot of {len(strategies)} strategies x {len(pixel_set)} pixels "
             f"x {spp} spp, {choice.seconds:.2f} s; efficiency relative to it: {choice.summary()})")
     return choice
-
-
-def chosen_strategy(recorded, auto: Strategy) -> Strategy | None:
-    """The strategy an earlier ``auto`` render chose, from its record (``tracer.record``), for a
-    render that adds samples to it; None if the record is not of an ``auto`` render."""
-    if recorded is None or getattr(recorded, "auto", None) is None:
-        return None
-    return Strategy.from_record(recorded)
 
