@@ -78,7 +78,13 @@ def strategies():
         ("mis_optimal_adaptive", Strategy("mis", "optimal", allocation="adaptive"), "independent"),
         ("mis_sobol", Strategy("mis"), "sobol"),
         ("auto", Strategy("auto"), "independent"),
+        ("auto_sobol", Strategy("auto"), "sobol"),
     ]
+
+
+# Strategies of the independent sampler that auto chooses among ("best fixed"); samplers are
+# compared with samplers (auto_sobol against mis_sobol).
+NOT_FIXED = ("auto", "auto_sobol", "mis_sobol")
 
 
 def city(seed: int, folder: Path) -> Path:
@@ -214,15 +220,22 @@ def markdown(doc: dict) -> str:
                 text = f"*{text}*"
             cells.append(text)
         lines.append(f"| {scene} | " + " | ".join(cells) + " |")
-    lines += ["", "`auto` against the best fixed strategy of each scene (its efficiency over the best's, "
-              "geometric mean over seeds), and what it chose:", "",
-              "| scene | best fixed | auto / best | auto / mis | auto chose |", "|---|---|---:|---:|---|"]
+    lines += ["", "`auto` against the best fixed strategy of each scene (independent sampler; efficiency "
+              "over the best's, geometric mean over seeds), what it chose, and `auto` with the Sobol "
+              "sampler against `mis` with it. The last column is the reference's own relMSE over the "
+              "least relMSE of the scene's runs: above about 1 the reference's noise, which is "
+              "subtracted, is larger than the error it measures, and the ratios of the best "
+              "strategies are less certain than their intervals say.", "",
+              "| scene | best fixed | auto / best | auto / mis | auto chose | auto_sobol / mis_sobol | "
+              "reference / best relMSE |", "|---|---|---:|---:|---|---:|---:|"]
     for scene, rows in doc["results"].items():
-        fixed = {k: v for k, v in rows.items() if k != "auto"}
+        fixed = {k: v for k, v in rows.items() if k not in NOT_FIXED}
         best = max(fixed, key=lambda k: fixed[k]["ratio"])
-        a = rows["auto"]
+        a, s = rows["auto"], rows["auto_sobol"]
+        least = min(min(r["relmse"]) for r in rows.values())
         lines.append(f"| {scene} | {best} | {a['ratio'] / fixed[best]['ratio']:.2f} | {a['ratio']:.2f} | "
-                     f"{', '.join(sorted(set(a['chose'])))} |")
+                     f"{', '.join(sorted(set(a['chose'])))} | {s['ratio'] / rows['mis_sobol']['ratio']:.2f} | "
+                     f"{doc['reference_relmse'][scene] / least:.1f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -250,7 +263,7 @@ def main() -> int:
     results: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
         files = scene_files(args, Path(tmp))
-        scenes = {}
+        scenes, reference_relmse = {}, {}
         for name, path in files.items():
             full = load_scene(path)
             height = max(1, round(args.width * full.camera.height / full.camera.width))
@@ -260,6 +273,7 @@ def main() -> int:
                                         RenderSettings(spp=REFERENCE_SPP, seed=10**6, threads=2)).film
             print(f"  {name}: reference {REFERENCE_SPP} spp in {time.perf_counter() - start:.1f} s", file=sys.stderr)
             scenes[name] = (scene, reference)
+            reference_relmse[name] = metrics.reference_relmse(reference.mean, reference.variance_of_mean())
         runs: dict = {name: {} for name in scenes}
         for seed in range(args.seeds):
             for name, (scene, reference) in scenes.items():
@@ -275,9 +289,10 @@ def main() -> int:
                     entry["relmse"].append(rel)
                     entry["seconds"].append(run.seconds)
                     entry["spp"].append(run.spp)
-                    entry["chose"].append(Strategy.from_record(run.film.record).slug if label == "auto" else label)
+                    chosen = label.startswith("auto")
+                    entry["chose"].append(Strategy.from_record(run.film.record).slug if chosen else label)
                     print(f"  seed {seed} {name} {label}: relMSE {rel:.4g}, {run.spp} spp in {run.seconds:.2f} s"
-                          + (f" (chose {entry['chose'][-1]})" if label == "auto" else ""), file=sys.stderr)
+                          + (f" (chose {entry['chose'][-1]})" if chosen else ""), file=sys.stderr)
         for name, by in runs.items():
             base = by["mis"]["efficiency"]
             results[name] = {}
@@ -291,6 +306,7 @@ def main() -> int:
                       f"{os.getloadavg()[0]:.2f} at the end",
            "command": "python " + " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
            "strategies": [(label, s.slug, sampler) for label, s, sampler in strategies()],
+           "reference_relmse": reference_relmse,
            "results": results}
     write_results(Path(args.out), "equal_time", doc, markdown(doc))
     return 0
