@@ -9,7 +9,8 @@ choose among technique combinations by variance and cost measured together.
 N, M, heuristic and environment sampling): ``mis`` (N light + M BSDF samples) and ``light`` (N)
 for every light sampling whose techniques differ on this scene (``area``, ``solid-angle``,
 ``solid-angle-cos``: on a scene of triangles only, the last two are the same technique) and
-every light selection worth trying (``power``; ``bvh`` too from ``BVH_MIN_LIGHTS`` lights), and
+every light selection worth trying (``power``; ``bvh`` too from ``BVH_MIN_LIGHTS`` (2) lights,
+counted where they are fewest: a quad is one light to solid-angle sampling), and
 ``bsdf`` (M). Only strategies that see all of the scene's light are candidates, so that
 whatever the pilot chooses estimates the same image: without light samples a point, spot or
 directional light is never reached, and without direction samples a delta lobe (a mirror, glass,
@@ -48,11 +49,12 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
-from . import samplers
+from . import samplers, tuning
 from .scene import Scene
 from .strategy import Strategy, light_samplings
 
@@ -61,8 +63,10 @@ PILOT_SPP = 8  # samples per pilot pixel and candidate
 # The relMSE's epsilon, as ``study.metrics.RELMSE_EPSILON`` (which the core may not import;
 # tests/test_auto.py checks they agree): the relative error of dark pixels.
 RELMSE_EPSILON = 0.01
-# From this many light candidates the light BVH is tried as well as power selection.
-BVH_MIN_LIGHTS = 8
+# From this many light candidates the light BVH is tried as well as power selection: from two,
+# because its choice depends on distance and orientation, which power selection ignores (two
+# point lights at different distances are enough for it to win).
+BVH_MIN_LIGHTS = 2
 # A pilot's seed: the render's, mixed with this (splitmix-style) so that the pilot's random
 # numbers are none of the render's.
 PILOT_SALT = 0x9E3779B97F4A7C15
@@ -77,8 +81,17 @@ COSTS = {
     "direction_ray": 3.62,    # a direction sample's closest-hit ray, the emitter it meets, its MIS pdf
     "solid-angle": 0.75,      # a solid-angle light sample (spherical rectangle / triangle, cone)
     "solid-angle-cos": 0.95,  # its cosine-warped variant
-    "bvh": 4.77,              # a light BVH descent (per light sample, and per MIS direction ray)
+    # A level of a light BVH descent (per light sample, and per MIS direction ray): the fit gave
+    # 4.77 a descent on many_lights, the only fitted scene with BVH candidates, whose tree of 2,248
+    # lights has bvh_levels = 12; a descent's work grows with its depth (two child importances a
+    # level), so a tree of a few lights costs a fraction of that.
+    "bvh_level": 4.77 / 12,
 }
+
+
+def bvh_levels(lights: int) -> int:
+    """Levels of a light BVH descent over ``lights`` candidates (a binary tree: ceil(log2))."""
+    return max(1, math.ceil(math.log2(max(lights, 1))))
 
 
 @dataclass(frozen=True)
@@ -152,14 +165,18 @@ def candidates(scene: Scene, auto: Strategy) -> list[Strategy]:
     # Each candidate as its render record gives it back (``Strategy.from_record``): what a
     # strategy does not use left at its default, so that a continued render is the same one.
     out = [Strategy("bsdf", light_samples=0, bsdf_samples=n_dir)]
+    tables = {sampling: LightSampler(scene, "power", sampling, auto.environment_sampling).tables
+              for sampling in light_samplings()}
+    # The BVH is worth a pilot where there are lights to choose between: counted where they are
+    # fewest (a quad light is two triangles to area sampling but one rectangle to solid-angle).
+    emitters = min(len(t.technique) for t in tables.values())
+    selections = ["power"] + (["bvh"] if emitters >= BVH_MIN_LIGHTS else [])
     seen: set[tuple[str, ...]] = set()
-    for sampling in light_samplings():
-        lights = LightSampler(scene, "power", sampling, auto.environment_sampling)
-        techniques = technique_names(lights.tables)
+    for sampling, light_tables in tables.items():
+        techniques = technique_names(light_tables)
         if techniques in seen:
             continue
         seen.add(techniques)
-        selections = ["power"] + (["bvh"] if len(lights.tables.technique) >= BVH_MIN_LIGHTS else [])
         for selection in selections:
             chosen = dict(light_sampling=sampling, light_selection=selection, **kept)
             out.append(Strategy("mis", light_samples=n_light, bsdf_samples=n_dir, **chosen))
@@ -224,9 +241,11 @@ def relmse_estimates(means: np.ndarray, variances: np.ndarray, spp: int) -> np.n
     return out
 
 
-def cost_per_sample(strategy: Strategy, lanes: int, shadow_rays: int, direction_rays: int) -> float:
+def cost_per_sample(strategy: Strategy, lanes: int, shadow_rays: int, direction_rays: int,
+                    lights: int = 1) -> float:
     """Cost of one camera sample of ``strategy`` (``COSTS``'s units) from a pilot of ``lanes``
-    camera samples that cast ``shadow_rays`` and ``direction_rays``."""
+    camera samples that cast ``shadow_rays`` and ``direction_rays``, on a scene of ``lights``
+    light candidates (the depth of its BVH)."""
     lanes = max(lanes, 1)
     cost = (COSTS["camera"] + COSTS["shading"] * (strategy.light_count + strategy.direction_count)
             + COSTS["shadow_ray"] * shadow_rays / lanes + COSTS["direction_ray"] * direction_rays / lanes)
@@ -235,36 +254,121 @@ def cost_per_sample(strategy: Strategy, lanes: int, shadow_rays: int, direction_
         if strategy.light_selection == "bvh":
             # A light sample descends the tree; an MIS direction ray asks it for the pmf of the
             # light it meets (counted per direction ray: a bound).
-            cost += COSTS["bvh"] * (strategy.light_count + direction_rays / lanes)
+            cost += COSTS["bvh_level"] * bvh_levels(lights) * (strategy.light_count + direction_rays / lanes)
     return cost
 
 
+class Pilot(NamedTuple):
+    """One candidate's pilot over the pilot pixels: per-pixel ``mean`` and unbiased ``variance``
+    ``(n, 3)``, the ``cost`` of a camera sample (:func:`cost_per_sample`), and for a ``mis``
+    candidate the per-pixel ``moments (n, 3)``: the mean over its camera samples of tuning's
+    second moments M(c) (channel mean) at c = 1 (light samples only), at its own split and at
+    c = 0 (BSDF samples only); None for the others."""
+
+    mean: np.ndarray
+    variance: np.ndarray
+    cost: float
+    moments: np.ndarray | None
+
+
+def pilot_strategy(strategy: Strategy) -> Strategy:
+    """The strategy whose pilot measures ``strategy``: for ``mis``, its learning build (adaptive
+    allocation), which in its first pass, all a pilot renders, is the same estimator with the
+    same fixed counts and also writes the second moments of the other splits (``tracer.tuning``);
+    any other strategy itself."""
+    if strategy.name == "mis" and strategy.light_count and strategy.direction_count and not strategy.adaptive:
+        return replace(strategy, allocation="adaptive")
+    return strategy
+
+
+def moment_shares(strategy: Strategy) -> np.ndarray:
+    """The shares c at which a pilot of ``strategy`` estimates M(c) (``tracer.tuning``'s
+    ``Tuning.shares``, whose length the kernels fix): 1, its own split, 0, then its own again."""
+    own = strategy.light_count / (strategy.light_count + strategy.direction_count)
+    shares = np.full(len(tuning.SHARES), own)
+    shares[0], shares[2] = 1.0, 0.0
+    return shares
+
+
 def measure(scene: Scene, strategy: Strategy, pixel_set: np.ndarray, seed: int, estimator=None,
-            spp: int = PILOT_SPP) -> tuple[np.ndarray, np.ndarray, float]:
+            spp: int = PILOT_SPP) -> Pilot:
     """Render ``spp`` samples of each pixel of ``pixel_set`` with ``strategy`` (independent
-    sampler, ``seed``): per-pixel mean and unbiased variance ``(n, 3)`` each, and the cost of a
-    camera sample (:func:`cost_per_sample`)."""
+    sampler, ``seed``) through the estimator of its pilot (``estimator``, else one of
+    :func:`pilot_strategy`)."""
     from .estimator import DirectLighting
 
-    estimator = estimator if estimator is not None else DirectLighting(scene, strategy)
+    estimator = estimator if estimator is not None else DirectLighting(scene, pilot_strategy(strategy))
     sampler = samplers.make("independent", seed, 0, spp)
     pixel = np.repeat(pixel_set, spp)
     sample = np.tile(np.arange(spp, dtype=np.int64), len(pixel_set))
+    learns = estimator.plan.adaptive
+    tuned = tuning.Tuning(np.zeros((0, 1)), np.zeros((0, 1, 3)), moment_shares(strategy), 1, 1, True) \
+        if learns else None
     rays: list[tuple[int, int]] = []
     origins, dirs = estimator.camera_rays(sampler, pixel, sample)
-    radiance = estimator.shade_lanes(origins, dirs, sampler, pixel, sample, rays=rays)[0]
+    radiance, lane_stats = estimator.shade_lanes(origins, dirs, sampler, pixel, sample, tuned=tuned, rays=rays)
     radiance = np.where(np.isfinite(radiance), radiance, 0.0).reshape(len(pixel_set), spp, 3)
+    moments = None
+    if learns:
+        first = tuning.FIRST_SHARE
+        # A NaN (0 / 0: a sample of no value where one technique cannot go) adds nothing.
+        moments = np.nan_to_num(lane_stats[:, first:first + 3], nan=0.0).reshape(len(pixel_set), spp, 3).mean(axis=1)
     shadow = sum(r[0] for r in rays)
     direction = sum(r[1] for r in rays)
-    return (radiance.mean(axis=1), radiance.var(axis=1, ddof=1),
-            cost_per_sample(strategy, len(pixel), shadow, direction))
+    cost = cost_per_sample(strategy, len(pixel), shadow, direction, len(estimator.lights.tables.technique))
+    return Pilot(radiance.mean(axis=1), radiance.var(axis=1, ddof=1), cost, moments)
+
+
+def single_technique_bounds(strategies: list[Strategy], pilots: list[Pilot], relmse: np.ndarray) -> np.ndarray:
+    """(K,) lower bounds on the relMSE per sample of each ``light`` and ``bsdf`` candidate,
+    from the second moments the pilot of a ``mis`` candidate measured (0 where none applies).
+
+    A pilot of light samples alone misses what makes them bad: the rare light sample of a
+    glossy lobe (the light's pdf far below the BSDF's) is worth f / p_l, huge, and 8 samples
+    of a pixel seldom draw one, so its sample variance is far too small (on a city of small
+    lights over a wet street, by 5 times; BSDF sampling's, of small bright windows, by 20).
+    MIS samples both techniques: each of its samples estimates the second moment
+    S(c) = N M(c) = integral f^2 / (c p_l + (1 - c) p_b) of every split c at once
+    (``tracer.tuning``), the light-only one (c = 1) included, and those values are not rare.
+    With N = n_l + n_b samples at split a, light alone with n = n_l samples has variance
+    (S(1) - F^2) / n per camera sample, and the mis pilot, as a mixture, at most
+    (S(a) - F^2) / N; F^2 <= S(c) for every c. So
+
+        Var(light) - Var(mis) >= S(1) / n - S(a) / N - min_c S(c) (1 / n - 1 / N)
+
+    per camera sample (the pixel footprint's variance is common to both), the same with c = 0
+    for ``bsdf``. Added to the mis candidate's relMSE (``relmse``, measured with its own
+    heuristic), normalized per pixel as the relMSE is, by the mean over channels of the
+    pooled mean squared plus the epsilon (the moments are channel means), it bounds the
+    single technique's relMSE from below, up to the pilot's noise."""
+    out = np.zeros(len(strategies))
+    for k, strategy in enumerate(strategies):
+        if strategy.light_count and strategy.direction_count:
+            continue
+        source = next((j for j, s in enumerate(strategies) if pilots[j].moments is not None and (
+            not strategy.light_count or (s.light_sampling, s.light_selection)
+            == (strategy.light_sampling, strategy.light_selection))), None)
+        if source is None:
+            continue
+        mis = strategies[source]
+        total = mis.light_count + mis.direction_count
+        moments = pilots[source].moments * total  # S(1), S(a), S(0) per pixel
+        own, count = (moments[:, 0], strategy.light_count) if strategy.light_count else (moments[:, 2], strategy.direction_count)
+        floor = moments.min(axis=1)
+        extra = own / count - moments[:, 1] / total - floor * (1.0 / count - 1.0 / total)
+        pooled = np.mean([p.mean for p in pilots], axis=0)
+        scale = 1.0 / ((pooled * pooled).mean(axis=1) + RELMSE_EPSILON)
+        with np.errstate(invalid="ignore"):
+            out[k] = relmse[source] + float(np.mean(extra * scale))
+    # NaN only from inf - inf: a technique that cannot produce light the other found.
+    return np.nan_to_num(out, nan=np.inf)
 
 
 def choose(scene: Scene, auto: Strategy, seed: int, estimators: dict | None = None,
            say=None, threads: int = 1) -> Choice:
     """Run the pilot of every candidate (module docstring), ``threads`` at once, and return the
-    most efficient. ``estimators`` (each of :func:`candidates` -> its ``DirectLighting``, built
-    and compiled by the caller), if given, are the candidates; ``say(text)`` reports what was
+    most efficient. ``estimators`` (each of :func:`candidates` -> the ``DirectLighting`` of its
+    :func:`pilot_strategy`, built and compiled by the caller), if given, are the candidates; ``say(text)`` reports what was
     chosen."""
     from concurrent.futures import ThreadPoolExecutor
 
@@ -274,12 +378,12 @@ def choose(scene: Scene, auto: Strategy, seed: int, estimators: dict | None = No
     spp = PILOT_SPP
     with ThreadPoolExecutor(max_workers=max(1, threads)) as pool:
         # Each candidate's pilot is one batch; Embree and the kernels release the GIL.
-        runs = list(pool.map(lambda i: measure(scene, strategies[i], pixel_set, pilot_seed(seed, i),
-                                               (estimators or {}).get(strategies[i]), spp),
-                             range(len(strategies))))
-    means, variances, costs = zip(*runs)
-    relmse = relmse_estimates(np.array(means), np.array(variances), spp)
-    measured = [Measured(s, float(r), c) for s, r, c in zip(strategies, relmse, costs)]
+        pilots = list(pool.map(lambda i: measure(scene, strategies[i], pixel_set, pilot_seed(seed, i),
+                                                 (estimators or {}).get(strategies[i]), spp),
+                               range(len(strategies))))
+    relmse = relmse_estimates(np.array([p.mean for p in pilots]), np.array([p.variance for p in pilots]), spp)
+    relmse = np.maximum(relmse, single_technique_bounds(strategies, pilots, relmse))
+    measured = [Measured(s, float(r), p.cost) for s, r, p in zip(strategies, relmse, pilots)]
     # Ties (a scene every candidate renders without noise) go to the candidate listed first.
     order = sorted(range(len(measured)), key=lambda i: (-measured[i].efficiency, i))
     ranked = tuple(measured[i] for i in order)

@@ -357,17 +357,27 @@ def _resolve_auto(scene: Scene, auto_strategy: Strategy, settings: RenderSetting
         candidates = auto.candidates(scene, auto_strategy)
     except ValueError as exc:
         raise InputError(f"{scene.path}: {exc}") from None
-    estimators = {s: DirectLighting(scene, s) for s in candidates}
+    pilots = {s: DirectLighting(scene, auto.pilot_strategy(s)) for s in candidates}
     pilot = samplers.make("independent", 0)
-    with interrupts.deferred("tracer: interrupted; stopping as soon as the kernels are compiled"
-                             if progress else None) as arrived:
-        for estimator in estimators.values():
-            estimator.compile(pilot, progress)
-    if arrived:
-        raise KeyboardInterrupt
+
+    def compiled(estimators):
+        with interrupts.deferred("tracer: interrupted; stopping as soon as the kernels are compiled"
+                                 if progress else None) as arrived:
+            for estimator in estimators:
+                estimator.compile(pilot, progress)
+        if arrived:
+            raise KeyboardInterrupt
+
+    compiled(pilots.values())
     say = (lambda text: print(f"tracer: {text}", file=sys.stderr)) if progress else None
-    choice = auto.choose(scene, auto_strategy, settings.seed, estimators, say, max(1, settings.threads))
-    return choice.strategy, estimators[choice.strategy], choice, choice.seconds
+    choice = auto.choose(scene, auto_strategy, settings.seed, pilots, say, max(1, settings.threads))
+    estimator = pilots[choice.strategy]
+    if auto.pilot_strategy(choice.strategy) != choice.strategy:
+        # A mis candidate's pilot ran its learning build; the render runs the plain one (compiled
+        # off the clock, as every render's kernels are).
+        estimator = DirectLighting(scene, choice.strategy)
+        compiled([estimator])
+    return choice.strategy, estimator, choice, choice.seconds
 
 
 def _check_part(tree: merge_tree.Layout, settings: RenderSettings, part: merge_tree.Task,
