@@ -25,7 +25,12 @@ those pixels and the channels of s^2 / (m^2 + 0.01), with s^2 the candidate's sa
 and m the pixel's mean over all candidates (each is unbiased; their mean is the steadiest value
 to normalize by), the measure ``tracer compare`` reports (``study.metrics.relmse``); or, where
 the candidate disagrees with the others by more than its own spread explains (it never sampled
-what carries the light), the relMSE that disagreement implies (:func:`relmse_estimates`).
+what carries the light), the relMSE that disagreement implies (:func:`relmse_estimates`); and
+for ``light`` and ``bsdf``, at least the relMSE that the second moments measured by a ``mis``
+pilot imply for them (:func:`single_technique_bounds`: a pilot of one technique misses its rare
+large samples, which MIS's samples of the other technique find). ``mis`` candidates run their
+pilot through the learning build of adaptive allocation (:func:`pilot_strategy`), which writes
+those moments; the render runs the plain build.
 
 **Cost**, deterministic (a seed gives the same choice on any machine and under any load), in
 units of one shadow ray (``COSTS``): a camera sample's ray and the shading of its hit, one
