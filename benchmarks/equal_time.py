@@ -225,7 +225,9 @@ def markdown(doc: dict) -> str:
               "sampler against `mis` with it. The last column is the reference's own relMSE over the "
               "least relMSE of the scene's runs: above about 1 the reference's noise, which is "
               "subtracted, is larger than the error it measures, and the ratios of the best "
-              "strategies are less certain than their intervals say.", "",
+              "strategies are less certain than their intervals say. The best fixed strategy is the "
+              "one of highest mean ratio in this same run, which favours it: the largest of a dozen "
+              "noisy ratios is biased upward.", "",
               "| scene | best fixed | auto / best | auto / mis | auto chose | auto_sobol / mis_sobol | "
               "reference / best relMSE |", "|---|---|---:|---:|---|---:|---:|"]
     for scene, rows in doc["results"].items():
@@ -233,9 +235,17 @@ def markdown(doc: dict) -> str:
         best = max(fixed, key=lambda k: fixed[k]["ratio"])
         a, s = rows["auto"], rows["auto_sobol"]
         least = min(min(r["relmse"]) for r in rows.values())
-        lines.append(f"| {scene} | {best} | {a['ratio'] / fixed[best]['ratio']:.2f} | {a['ratio']:.2f} | "
+        ratio, lo, hi = ratio_interval(a["efficiency"], fixed[best]["efficiency"])
+        lines.append(f"| {scene} | {best} | {ratio:.2f} [{lo:.2f}, {hi:.2f}] | {a['ratio']:.2f} | "
                      f"{', '.join(sorted(set(a['chose'])))} | {s['ratio'] / rows['mis_sobol']['ratio']:.2f} | "
                      f"{doc['reference_relmse'][scene] / least:.1f} |")
+    lines += ["", "Where each strategy loses to `mis` at equal time (its interval below 1) and where it wins "
+              "(above 1):", "", "| strategy | loses on | wins on |", "|---|---|---|"]
+    for name in names[1:]:
+        by = {scene: rows[name] for scene, rows in doc["results"].items() if name in rows}
+        loses = [f"{scene} ({r['ratio']:.2f})" for scene, r in by.items() if r["hi"] < 1]
+        wins = [f"{scene} ({r['ratio']:.2f})" for scene, r in by.items() if r["lo"] > 1]
+        lines.append(f"| {name} | {', '.join(loses) or '-'} | {', '.join(wins) or '-'} |")
     return "\n".join(lines) + "\n"
 
 

@@ -172,20 +172,35 @@ def test_a_distributed_render_refuses_auto():
 
 def test_single_technique_bounds_follow_the_second_moments():
     """The bound of :func:`auto.single_technique_bounds` on made-up pilots (exact arithmetic, no
-    sampling): where every split has the same second moment (the integrand is what each
-    technique samples in proportion: zero variance), light alone is bounded by mis's relMSE;
-    where light alone's second moment S(1) is 9 and mis's S(a) 1 (N = 2, n = 1; min S = 1), light
-    alone's variance exceeds mis's by at least 9 - 1/2 - 1 x (1 - 1/2) = 8 per camera sample,
-    relative to the pooled mean squared (1) plus the epsilon."""
-    mis, light = Strategy("mis"), Strategy("light")
+    sampling): where every split has the same second moment S (the integrand is what each
+    technique samples in proportion: zero variance), light and bsdf alone are bounded by 0;
+    with S(1) = 9, S(a) = 1, S(0) = 3 (N = 2; mean 1 in every channel, so the scale is 1 /
+    (1 + 0.01)) light alone (n = 1) has variance at least 9 - 1 = 8 and bsdf alone 3 - 1 = 2; a
+    technique that cannot produce the light the other found (S = inf) is bounded by inf; light
+    with solid-angle sampling takes its moments from mis with solid-angle sampling, not area;
+    where the pixel's mean squared is below min S, the bound from E[Y^2] is the larger."""
+    mis, light, bsdf = Strategy("mis"), Strategy("light"), Strategy("bsdf", light_samples=0)
     mean, variance = np.ones((4, 3)), np.zeros((4, 3))
-    flat = auto.Pilot(mean, variance, 1.0, np.full((4, 3), 0.5))  # M = S / N
-    pilots = [flat, auto.Pilot(mean, variance, 1.0, None)]
-    bounds = auto.single_technique_bounds([mis, light], pilots, np.array([0.25, 0.0]))
-    assert bounds[0] == 0.0 and bounds[1] == pytest.approx(0.25)
-    tailed = auto.Pilot(mean, variance, 1.0, np.tile([4.5, 0.5, 0.5], (4, 1)))
-    bounds = auto.single_technique_bounds([mis, light], [tailed, pilots[1]], np.array([0.25, 0.0]))
-    assert bounds[1] == pytest.approx(0.25 + 8.0 / (1.0 + auto.RELMSE_EPSILON))
+
+    def pilot(moments):
+        return auto.Pilot(mean, variance, 1.0, None if moments is None else np.tile(moments, (4, 1)))
+
+    flat = auto.single_technique_bounds([mis, light, bsdf], [pilot([0.5, 0.5, 0.5]), pilot(None), pilot(None)])
+    assert list(flat) == [0.0, 0.0, 0.0]
+    tailed = auto.single_technique_bounds([mis, light, bsdf], [pilot([4.5, 0.5, 1.5]), pilot(None), pilot(None)])
+    assert tailed[1] == pytest.approx(8.0 / 1.01) and tailed[2] == pytest.approx(2.0 / 1.01)
+    blind = auto.single_technique_bounds([mis, light], [pilot([np.inf, 0.5, 0.5]), pilot(None)])
+    assert blind[1] == np.inf
+    solid = Strategy("mis", light_sampling="solid-angle")
+    light_solid = Strategy("light", light_sampling="solid-angle")
+    by_sampling = auto.single_technique_bounds([mis, solid, light_solid],
+                                               [pilot([4.5, 0.5, 0.5]), pilot([1.0, 0.5, 0.5]), pilot(None)])
+    assert by_sampling[2] == pytest.approx(1.0 / 1.01)
+    # A pixel mean of 0.5 (m^2 = 0.25 below min S = 1): light's camera sample has E[Y^2] >= S(1)
+    # = 9, so its variance is at least 9 - 0.25, more than 9 - min S; scale 1 / (0.25 + 0.01).
+    mean[:] = 0.5
+    dim = auto.single_technique_bounds([mis, light], [pilot([4.5, 0.5, 0.5]), pilot(None)])
+    assert dim[1] == pytest.approx(8.75 / 0.26)
 
 
 def test_a_pilot_of_mis_sees_the_glossy_tail_of_light_sampling():
@@ -200,6 +215,6 @@ def test_a_pilot_of_mis_sees_the_glossy_tail_of_light_sampling():
     pilots = [auto.measure(scene, s, pixels, auto.pilot_seed(0, i)) for i, s in enumerate(strategies)]
     own = auto.relmse_estimates(np.array([p.mean for p in pilots]), np.array([p.variance for p in pilots]),
                                 auto.PILOT_SPP)
-    bound = auto.single_technique_bounds(strategies, pilots, own)
+    bound = auto.single_technique_bounds(strategies, pilots)
     assert pilots[0].moments is not None and pilots[1].moments is None
     assert bound[1] > 2.0 * own[1], (bound, own)

@@ -316,15 +316,17 @@ def measure(scene: Scene, strategy: Strategy, pixel_set: np.ndarray, seed: int, 
     moments = None
     if learns:
         first = tuning.FIRST_SHARE
-        # A NaN (0 / 0: a sample of no value where one technique cannot go) adds nothing.
-        moments = np.nan_to_num(lane_stats[:, first:first + 3], nan=0.0).reshape(len(pixel_set), spp, 3).mean(axis=1)
+        # A lane's NaN (0 / 0: a sample of no value where one technique cannot go) counts as 0,
+        # which can only lower the bound; inf (light one technique cannot produce) stays.
+        moments = np.nan_to_num(lane_stats[:, first:first + 3], nan=0.0, posinf=np.inf)
+        moments = moments.reshape(len(pixel_set), spp, 3).mean(axis=1)
     shadow = sum(r[0] for r in rays)
     direction = sum(r[1] for r in rays)
     cost = cost_per_sample(strategy, len(pixel), shadow, direction, len(estimator.lights.tables.technique))
     return Pilot(radiance.mean(axis=1), radiance.var(axis=1, ddof=1), cost, moments)
 
 
-def single_technique_bounds(strategies: list[Strategy], pilots: list[Pilot], relmse: np.ndarray) -> np.ndarray:
+def single_technique_bounds(strategies: list[Strategy], pilots: list[Pilot]) -> np.ndarray:
     """(K,) lower bounds on the relMSE per sample of each ``light`` and ``bsdf`` candidate,
     from the second moments the pilot of a ``mis`` candidate measured (0 where none applies).
 
@@ -334,19 +336,28 @@ def single_technique_bounds(strategies: list[Strategy], pilots: list[Pilot], rel
     lights over a wet street, by 5 times; BSDF sampling's, of small bright windows, by 20).
     MIS samples both techniques: each of its samples estimates the second moment
     S(c) = N M(c) = integral f^2 / (c p_l + (1 - c) p_b) of every split c at once
-    (``tracer.tuning``), the light-only one (c = 1) included, and those values are not rare.
-    With N = n_l + n_b samples at split a, light alone with n = n_l samples has variance
-    (S(1) - F^2) / n per camera sample, and the mis pilot, as a mixture, at most
-    (S(a) - F^2) / N; F^2 <= S(c) for every c. So
+    (``tracer.tuning``; f and the pdfs are those of one camera sample's shading point), the
+    light-only one (c = 1) included, and those values are not rare. Light alone with n samples
+    has variance (S(1) - F^2) / n given the camera sample (F the shading's expected value there),
+    and two bounds follow, per pixel, whichever is larger:
 
-        Var(light) - Var(mis) >= S(1) / n - S(a) / N - min_c S(c) (1 / n - 1 / N)
+    - F^2 <= S(c) for every c, so Var(light) >= (S(1) - min_c S(c)) / n, the variance of F
+      over the pixel's footprint left out (it only adds);
+    - with one light sample, light's camera sample Y = Le + f / p_l (Le the emission seen
+      directly, >= 0, as F is) has E[Y^2] >= E[S(1)], so Var(Y) >= E[S(1)] - m^2 with m the
+      pixel's mean (the pooled pilots'); with n samples the variance is at least 1 / n of
+      that. This one keeps the F^2 the first drops where F is most of S(1).
 
-    per camera sample (the pixel footprint's variance is common to both), the same with c = 0
-    for ``bsdf``. Added to the mis candidate's relMSE (``relmse``, measured with its own
-    heuristic), normalized per pixel as the relMSE is, by the mean over channels of the
-    pooled mean squared plus the epsilon (the moments are channel means), it bounds the
-    single technique's relMSE from below, up to the pilot's noise."""
+    The same with S(0) for ``bsdf``. Per pixel the bound is divided by the largest channel's
+    pooled mean squared plus the epsilon: S is a mean over channels (so m^2 above is too), and
+    mean_c Var_c / (m_c^2 + eps) >= mean_c Var_c / (max_c m_c^2 + eps). Up to the pilot's noise
+    (means over 4,096 pixels of means over 8 samples of values that are not heavy-tailed) the
+    result is below the technique's relMSE; the heuristic the mis pilot renders with plays no
+    part."""
     out = np.zeros(len(strategies))
+    pooled = np.mean([p.mean for p in pilots], axis=0)
+    squared = (pooled * pooled).mean(axis=1)
+    scale = 1.0 / ((pooled * pooled).max(axis=1) + RELMSE_EPSILON)
     for k, strategy in enumerate(strategies):
         if strategy.light_count and strategy.direction_count:
             continue
@@ -356,17 +367,13 @@ def single_technique_bounds(strategies: list[Strategy], pilots: list[Pilot], rel
         if source is None:
             continue
         mis = strategies[source]
-        total = mis.light_count + mis.direction_count
-        moments = pilots[source].moments * total  # S(1), S(a), S(0) per pixel
-        own, count = (moments[:, 0], strategy.light_count) if strategy.light_count else (moments[:, 2], strategy.direction_count)
-        floor = moments.min(axis=1)
-        extra = own / count - moments[:, 1] / total - floor * (1.0 / count - 1.0 / total)
-        pooled = np.mean([p.mean for p in pilots], axis=0)
-        scale = 1.0 / ((pooled * pooled).mean(axis=1) + RELMSE_EPSILON)
-        with np.errstate(invalid="ignore"):
-            out[k] = relmse[source] + float(np.mean(extra * scale))
-    # NaN only from inf - inf: a technique that cannot produce light the other found.
-    return np.nan_to_num(out, nan=np.inf)
+        moments = pilots[source].moments * (mis.light_count + mis.direction_count)  # S(1), S(a), S(0)
+        own, count = (moments[:, 0], strategy.light_count) if strategy.light_count \
+            else (moments[:, 2], strategy.direction_count)
+        # own is inf where the technique cannot produce light the other found: so is the bound.
+        excess = np.maximum(own - moments.min(axis=1), own - squared)
+        out[k] = float(np.mean(excess * scale)) / count
+    return out
 
 
 def choose(scene: Scene, auto: Strategy, seed: int, estimators: dict | None = None,
@@ -387,7 +394,7 @@ def choose(scene: Scene, auto: Strategy, seed: int, estimators: dict | None = No
                                                  (estimators or {}).get(strategies[i]), spp),
                                range(len(strategies))))
     relmse = relmse_estimates(np.array([p.mean for p in pilots]), np.array([p.variance for p in pilots]), spp)
-    relmse = np.maximum(relmse, single_technique_bounds(strategies, pilots, relmse))
+    relmse = np.maximum(relmse, single_technique_bounds(strategies, pilots))
     measured = [Measured(s, float(r), p.cost) for s, r, p in zip(strategies, relmse, pilots)]
     # Ties (a scene every candidate renders without noise) go to the candidate listed first.
     order = sorted(range(len(measured)), key=lambda i: (-measured[i].efficiency, i))
