@@ -203,6 +203,7 @@ def test_single_technique_bounds_follow_the_second_moments():
     assert dim[1] == pytest.approx(8.75 / 0.26)
 
 
+@pytest.mark.slow  # compiles veach_mis's learning build (about 35 s cold): CI's run took 15 min 15 s with it
 def test_a_pilot_of_mis_sees_the_glossy_tail_of_light_sampling():
     """veach_mis's sharp plates reflect the big lights in a narrow lobe, which light samples
     reach rarely and at a great value: a pilot of light samples alone underestimates their
