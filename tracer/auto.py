@@ -311,7 +311,8 @@ def measure(scene: Scene, strategy: Strategy, pixel_set: np.ndarray, seed: int, 
         if learns else None
     rays: list[tuple[int, int]] = []
     origins, dirs = estimator.camera_rays(sampler, pixel, sample)
-    radiance, lane_stats = estimator.shade_lanes(origins, dirs, sampler, pixel, sample, tuned=tuned, rays=rays)
+    radiance, lane_stats = estimator.shade_lanes(origins, dirs, sampler, pixel, sample, tuned=tuned,
+                                                 rays=rays)
     radiance = np.where(np.isfinite(radiance), radiance, 0.0).reshape(len(pixel_set), spp, 3)
     moments = None
     if learns:
@@ -356,8 +357,9 @@ def single_technique_bounds(strategies: list[Strategy], pilots: list[Pilot]) -> 
     part."""
     out = np.zeros(len(strategies))
     pooled = np.mean([p.mean for p in pilots], axis=0)
-    squared = (pooled * pooled).mean(axis=1)
-    scale = 1.0 / ((pooled * pooled).max(axis=1) + RELMSE_EPSILON)
+    pooled_squared = pooled * pooled
+    squared = pooled_squared.mean(axis=1)
+    scale = 1.0 / (pooled_squared.max(axis=1) + RELMSE_EPSILON)
     for k, strategy in enumerate(strategies):
         if strategy.light_count and strategy.direction_count:
             continue
@@ -380,8 +382,8 @@ def choose(scene: Scene, auto: Strategy, seed: int, estimators: dict | None = No
            say=None, threads: int = 1) -> Choice:
     """Run the pilot of every candidate (module docstring), ``threads`` at once, and return the
     most efficient. ``estimators`` (each of :func:`candidates` -> the ``DirectLighting`` of its
-    :func:`pilot_strategy`, built and compiled by the caller), if given, are the candidates; ``say(text)`` reports what was
-    chosen."""
+    :func:`pilot_strategy`, built and compiled by the caller), if given, are the candidates;
+    ``say(text)`` reports what was chosen."""
     from concurrent.futures import ThreadPoolExecutor
 
     start = time.perf_counter()
