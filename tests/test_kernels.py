@@ -164,7 +164,7 @@ def test_two_feature_sets_share_nothing_stale_in_the_disk_cache(tmp_path):
 
 UNUSED = {"sobol sampler": ("tracer.samplers.sobol", "point"),
           "stratified sampler": ("tracer.samplers.stratified", "point"),
-          "light BVH": ("tracer.lights.bvh", "choose"),
+          "light BVH": ("tracer.lights.bvh", "_build"),
           "rough plastic": ("tracer.materials.roughplastic", "eval_pdf"),
           "Beckmann sampling": ("tracer.materials.microfacet", "beckmann_visible_normal"),
           "spherical rectangles": ("tracer.lights.techniques.spherical_rectangle", "sample_warped"),

@@ -148,7 +148,8 @@ def test_tree_bounds_what_it_claims_for_100k_emitters():
     nodes, child = tree.nodes, tree.child
     assert len(nodes) == 2 * count - 1
     leaves = child < 0
-    assert np.array_equal(np.sort(-1 - child[leaves]), np.arange(count))
+    assert np.array_equal(np.sort(-1 - child[leaves]), np.arange(count))  # no owners: no clusters
+    assert np.all(tree.span[leaves] == 1) and np.all(tree.share == 1.0)
     assert tree.trail_depth.max() <= bvh.TRAIL_BITS + 1
     parent = np.flatnonzero(~leaves)
     for side in (0, 1):
@@ -175,6 +176,62 @@ def test_tree_bounds_what_it_claims_for_100k_emitters():
         between = 2.0 * np.arctan2(np.linalg.norm(a - b, axis=1), np.linalg.norm(a + b, axis=1))
         spread = np.minimum(np.arccos(cos_o[k]) + between, np.pi)
         assert np.all(spread <= np.arccos(np.clip(nodes[path, bvh.COS_O], -1, 1)) + 1e-9)
+
+
+def test_a_quads_two_triangles_share_a_leaf_and_nothing_else_does():
+    """``bvh.clusters`` groups consecutive candidates of one emitter facing one way whose box
+    stays within CLUSTER_SPREAD of the largest member's: a quad's two triangles (axis-aligned,
+    and turned 45 degrees in its plane) join; the next quad of the same mesh, a triangle of
+    another emitter, one facing elsewhere and a sphere (a cone of every direction) do not.
+    The scene's tree then has one leaf per quad, each member chosen by its share of the leaf's
+    power, the shares of a leaf summing to 1."""
+    def triangle(a, b, c):
+        pts = np.array([a, b, c], dtype=float)
+        return pts.min(axis=0), pts.max(axis=0)
+
+    turned = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]) * np.sqrt(0.5)
+    boxes = [triangle([0, 0, 0], [1, 0, 0], [1, 1, 0]), triangle([0, 0, 0], [1, 1, 0], [0, 1, 0]),  # quad 1
+             triangle([1, 0, 0], [2, 0, 0], [2, 1, 0]), triangle([1, 0, 0], [2, 1, 0], [1, 1, 0]),  # quad 2
+             triangle(turned[0], turned[1], turned[2]), triangle(turned[0], turned[2], turned[3]),  # turned
+             triangle([5, 0, 0], [6, 0, 0], [6, 1, 0]),  # another emitter
+             triangle([5, 0, 0], [6, 1, 0], [5, 1, 0]),  # same as the one before, facing elsewhere
+             (np.array([9.0, 0, 0]), np.array([10.0, 1, 1]))]  # a sphere
+    lo, hi = np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes])
+    axis = np.tile([0.0, 0.0, 1.0], (len(boxes), 1))
+    axis[7] = [0.0, 1.0, 0.0]
+    cos_o = np.ones(len(boxes))
+    cos_o[8] = -1.0
+    owner = np.array([0, 0, 0, 0, 1, 1, 2, 2, 3])
+    assert bvh.clusters(lo, hi, axis, cos_o, owner).tolist() == [0, 2, 4, 6, 7, 8, 9]
+
+    sampler = LightSampler(load_scene(many_light_scene()), "bvh")
+    tree = sampler.tables.selection
+    leaves = tree.child < 0
+    quads = 300
+    assert leaves.sum() == quads + 4 + 3 and np.sum(tree.span[leaves] == 2) == quads
+    first = -1 - tree.child[leaves]
+    sums = np.array([tree.share[f:f + s].sum() for f, s in zip(first, tree.span[leaves], strict=True)])
+    np.testing.assert_allclose(sums, 1.0, rtol=1e-12)
+    # A cluster's normal cone holds each member's normal (the two triangles' normals differ by
+    # rounding; a cone of spread 0 around the first would not hold the second).
+    axis = _candidates(sampler.scene).axis
+    for leaf in np.flatnonzero(leaves & (tree.span > 1)):
+        k = -1 - tree.child[leaf]
+        a = tree.nodes[leaf, bvh.AXIS:bvh.AXIS + 3]
+        for b in axis[k:k + tree.span[leaf]]:
+            angle = 2.0 * np.arctan2(np.linalg.norm(a - b), np.linalg.norm(a + b))
+            assert angle <= np.arccos(np.clip(tree.nodes[leaf, bvh.COS_O], -1, 1)) + 1e-12
+
+
+def _candidates(scene):
+    """The light candidates of ``scene`` under area sampling, as ``build_tables`` orders them."""
+    from tracer.lights import _triangle_records, emitters, techniques_for
+
+    triangles = emitters.emitting_triangles(scene)
+    records = _triangle_records(scene, triangles, np.zeros(len(triangles), bool), techniques_for("area"))
+    records.update(sphere=emitters.spheres(scene), point=emitters.points(scene),
+                   directional=emitters.directionals(scene), environment=emitters.environment(scene))
+    return emitters.Candidates.of([records[kind] for kind in emitters.KINDS])
 
 
 def test_alias_table_reproduces_the_pmf():

@@ -38,9 +38,14 @@ axis and spread, from a sum of axes: no trigonometry per light); the nodes' boun
 are exact unions, made bottom up once the tree stands. Nodes of up to four lights split at the
 median. Compiled; no loop over lights runs in the interpreter: 100,000 emitters build in
 0.4-0.7 s on the 2-core test machine (``benchmarks/many_lights.py`` measured 0.67 s). Leaves
-hold one candidate; each node's children are stored side by side (``child[i]``,
-``child[i] + 1``), and a leaf's path from the root is its *trail*, one bit per level (1: the
-second child), as in pbrt-v4, which the pmf walk follows.
+hold one candidate, or a *cluster*: a few consecutive candidates of one emitter with one normal
+whose boxes together are hardly bigger than the largest (``clusters``: the two triangles of a
+quad light under area sampling), chosen among themselves by power. Splitting a quad's halves
+buys the descent almost nothing (both are as near, as bright and facing the same way) and
+costs a level everywhere: on Mitsuba's Cornell box a level was the whole tree, and 28% of the
+render's time. Each node's children are stored side by side (``child[i]``, ``child[i] + 1``),
+and a leaf's path from the root is its *trail*, one bit per level (1: the second child), as in
+pbrt-v4, which the pmf walk follows; a cluster's members share it.
 
 What the tree buys, measured at three shading points of the ``many_lights`` street as the sum
 over lights of share^2 / pmf (share: the light's part of the point's unshadowed light; 1 is a
@@ -61,7 +66,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..jit import jit, jit_called
+from ..jit import jit
 from ..samplers import reuse
 
 NODE_WIDTH = 20
@@ -77,55 +82,136 @@ MAX_IMPORTANCE = 1e300
 
 
 class LightTree(NamedTuple):
-    """A light BVH over K candidates.
+    """A light BVH over K candidates in C leaves (clusters of consecutive candidates).
 
-    nodes : (2 K - 1, NODE_WIDTH) float64 node bounds; node 0 is the root.
-    child : (2 K - 1,) int64, the first of node i's two children (the second is child[i] + 1),
-        or -1 - k for a leaf holding candidate k.
-    trail : (K,) int64, candidate k's path from the root: bit l says which child it takes at
-        level l (1: the second).   trail_depth : (K,) int64, the length of that path.
+    nodes : (2 C - 1, NODE_WIDTH) float64 node bounds; node 0 is the root.
+    child : (2 C - 1,) int64, the first of node i's two children (the second is child[i] + 1),
+        or -1 - k for a leaf whose first candidate is k.
+    span : (2 C - 1,) int64, a leaf's number of candidates (k .. k + span - 1); 0 for the others.
+    share : (K,) float64, candidate k's probability within its leaf (its power over the leaf's).
+    trail : (K,) int64, the path from the root to candidate k's leaf: bit l says which child it
+        takes at level l (1: the second).   trail_depth : (K,) int64, the length of that path.
     """
 
     nodes: np.ndarray
     child: np.ndarray
+    span: np.ndarray
+    share: np.ndarray
     trail: np.ndarray
     trail_depth: np.ndarray
 
 
 def empty() -> LightTree:
     """The tree of a render that does not select by BVH (no nodes)."""
-    return LightTree(np.zeros((0, NODE_WIDTH)), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
-                     np.zeros(0, dtype=np.int64))
+    none = np.zeros(0, dtype=np.int64)
+    return LightTree(np.zeros((0, NODE_WIDTH)), none, none, np.zeros(0), none, none)
+
+
+# A cluster holds at most this many candidates, and its box's diagonal is at most CLUSTER_SPREAD
+# times its largest member's (a quad's two triangles: 1 for an axis-aligned quad, 1.26 for one
+# turned 45 degrees in its plane; two neighbouring quads of a grid: 2 and more).
+CLUSTER_MAX = 4
+CLUSTER_SPREAD = 1.5
+# Normals this close (cosine; about 1.4e-4 rad) count as one way: the two triangles of a quad of
+# float32 vertices have normals up to ~2e-5 rad apart. (The leaf's cone is their exact union.)
+SAME_WAY = 1.0 - 1e-8
 
 
 def build(lo: np.ndarray, hi: np.ndarray, axis: np.ndarray, cos_o: np.ndarray, cos_e: np.ndarray,
-          power: np.ndarray) -> LightTree:
+          power: np.ndarray, owner: np.ndarray | None = None) -> LightTree:
     """The tree over K candidates with boxes ``lo, hi (K, 3)``, unit cone axes ``axis (K, 3)``,
     cone spreads ``cos_o (K,)`` (1: one direction, -1: all), emission spreads ``cos_e (K,)``
-    (0 for emitters that shine over their front hemisphere) and powers ``power (K,)`` (> 0)."""
+    (0 for emitters that shine over their front hemisphere) and powers ``power (K,)`` (> 0).
+    With ``owner (K,)`` (the emitter each candidate belongs to), consecutive candidates of one
+    emitter and one normal that lie close together share a leaf (:func:`clusters`); without
+    it, every leaf holds one candidate."""
     count = len(power)
     if count == 0:
         return empty()
     size = np.abs(hi - lo) + np.abs(lo) + np.abs(hi)
-    leaves = np.zeros((count, NODE_WIDTH))
-    leaves[:, LO:LO + 3] = lo - BOX_PAD * size
-    leaves[:, HI:HI + 3] = hi + BOX_PAD * size
-    leaves[:, AXIS:AXIS + 3] = axis
-    leaves[:, COS_O] = cos_o
-    leaves[:, COS_E] = cos_e
-    leaves[:, THETA_O] = np.arccos(np.clip(cos_o, -1.0, 1.0))
-    leaves[:, THETA_E] = np.arccos(np.clip(cos_e, -1.0, 1.0))
-    leaves[:, POWER] = power
-    nodes, child, trail, trail_depth = _build(leaves)
-    # Internal nodes' cone cosines from their angles (a leaf keeps the cosine it was given).
-    inner = child >= 0
-    nodes[inner, COS_O] = np.cos(nodes[inner, THETA_O])
+    rows = np.zeros((count, NODE_WIDTH))
+    rows[:, LO:LO + 3] = lo - BOX_PAD * size
+    rows[:, HI:HI + 3] = hi + BOX_PAD * size
+    rows[:, AXIS:AXIS + 3] = axis
+    rows[:, COS_O] = cos_o
+    rows[:, COS_E] = cos_e
+    rows[:, THETA_O] = np.arccos(np.clip(cos_o, -1.0, 1.0))
+    rows[:, THETA_E] = np.arccos(np.clip(cos_e, -1.0, 1.0))
+    rows[:, POWER] = power
+    first = (clusters(lo, hi, axis, cos_o, np.asarray(owner, dtype=np.int64)) if owner is not None
+             else np.arange(count + 1))
+    leaves = _cluster_rows(rows, first)
+    nodes, child, trail_c, depth_c = _build(leaves)
+    # Leaves name their first candidate and how many follow; members inherit their leaf's trail.
+    leaf = child < 0
+    cluster = -1 - child[leaf]
+    span = np.zeros(len(child), dtype=np.int64)
+    span[leaf] = first[cluster + 1] - first[cluster]
+    child[leaf] = -1 - first[cluster]
+    members = np.diff(first)
+    trail = np.repeat(trail_c, members)
+    trail_depth = np.repeat(depth_c, members)
+    cluster_power = np.repeat(leaves[:, POWER], members)
+    share = np.where(members.repeat(members) == 1, 1.0, power / cluster_power)
+    # The cone cosines of internal nodes and clusters from their angles, unions made by
+    # _cone_union (a leaf of one candidate keeps the cosine it was given).
+    united = (child >= 0) | (span > 1)
+    nodes[united, COS_O] = np.cos(nodes[united, THETA_O])
     half = 0.5 * (nodes[:, HI:HI + 3] - nodes[:, LO:LO + 3])
     nodes[:, CENTRE:CENTRE + 3] = nodes[:, LO:LO + 3] + half
     nodes[:, RADIUS2] = np.sum(half * half, axis=1)
     nodes[:, RADIUS] = np.sqrt(nodes[:, RADIUS2])
     nodes[:, SIN_O] = np.sqrt(np.maximum(1.0 - nodes[:, COS_O] ** 2, 0.0))
-    return LightTree(nodes, child, trail, trail_depth)
+    return LightTree(nodes, child, span, share, trail, trail_depth)
+
+
+@jit
+def clusters(lo, hi, axis, cos_o, owner):
+    """``first (C + 1,)``: the candidates split into C runs of consecutive ones, run c being
+    ``first[c] .. first[c + 1] - 1``. A candidate joins the run before it when both belong to
+    one emitter (``owner``), face one way (single-direction cones, ``cos_o`` 1, with axes within
+    SAME_WAY) and the run's box stays within CLUSTER_SPREAD times the diagonal of its largest
+    member, up to CLUSTER_MAX members. Any grouping keeps the selection unbiased (a leaf's members
+    are chosen by power, the pmf says so); this one only decides which splits are not worth a
+    level of descent."""
+    count = len(owner)
+    first = np.zeros(count + 1, dtype=np.int64)
+    runs = 0
+    box = np.zeros(6)
+    largest = 0.0
+    for k in range(count):
+        ex, ey, ez = hi[k, 0] - lo[k, 0], hi[k, 1] - lo[k, 1], hi[k, 2] - lo[k, 2]
+        diagonal = math.sqrt(ex * ex + ey * ey + ez * ez)
+        joins = False
+        if k > 0 and k - first[runs - 1] < CLUSTER_MAX and owner[k] == owner[k - 1] and cos_o[k] >= 1.0 \
+                and cos_o[k - 1] >= 1.0:
+            same_way = axis[k, 0] * axis[k - 1, 0] + axis[k, 1] * axis[k - 1, 1] + axis[k, 2] * axis[k - 1, 2]
+            spread = 0.0
+            for a in range(3):
+                spread += (max(box[3 + a], hi[k, a]) - min(box[a], lo[k, a])) ** 2
+            joins = same_way >= SAME_WAY and math.sqrt(spread) <= CLUSTER_SPREAD * max(largest, diagonal)
+        if not joins:
+            first[runs] = k
+            runs += 1
+            largest = 0.0
+            for a in range(3):
+                box[a], box[3 + a] = lo[k, a], hi[k, a]
+        for a in range(3):
+            box[a], box[3 + a] = min(box[a], lo[k, a]), max(box[3 + a], hi[k, a])
+        largest = max(largest, diagonal)
+    first[runs] = count
+    return first[:runs + 1]
+
+
+@jit
+def _cluster_rows(rows, first):
+    """One node row per run of ``first`` (:func:`clusters`): the union of its members' rows."""
+    out = np.zeros((len(first) - 1, NODE_WIDTH))
+    for c in range(len(first) - 1):
+        out[c, :] = rows[first[c]]
+        for k in range(first[c] + 1, first[c + 1]):
+            _merge(out[c], rows[k])
+    return out
 
 
 BINS = 12
@@ -424,12 +510,12 @@ def importance(nodes, i: int, x, n) -> float:
     return min(value, MAX_IMPORTANCE)
 
 
-@jit_called
-def choose(nodes, child, x, n, u: float):
+@jit
+def choose(nodes, child, span, share, x, n, u: float):
     """Descend from the root, each child in proportion to its importance at ``(x, n)``, using
-    ``u`` in [0, 1) (rescaled at every level). Returns ``(candidate, pmf)``, or ``(-1, 0.0)``
-    when no light can reach x (both children of a node have importance 0; only lights that
-    cannot contribute lose that probability)."""
+    ``u`` in [0, 1) (rescaled at every level), then a member of the leaf by its ``share``.
+    Returns ``(candidate, pmf)``, or ``(-1, 0.0)`` when no light can reach x (both children of
+    a node have importance 0; only lights that cannot contribute lose that probability)."""
     node = 0
     prob = 1.0
     while child[node] >= 0:
@@ -448,13 +534,21 @@ def choose(nodes, child, x, n, u: float):
         else:
             node = first + 1
             prob *= i1 / total
-    return -1 - child[node], prob
+    k = -1 - child[node]
+    if span[node] == 1:
+        return k, prob
+    last = k + span[node] - 1
+    while k < last and not u < share[k]:  # the member by the running sum of shares
+        u -= share[k]
+        k += 1
+    return k, prob * share[k]
 
 
-@jit_called
-def pmf_of(nodes, child, trail, trail_depth, k: int, x, n) -> float:
+@jit
+def pmf_of(nodes, child, span, share, trail, trail_depth, k: int, x, n) -> float:
     """The probability that :func:`choose` at ``(x, n)`` returns candidate ``k``: the same
-    branch probabilities along k's trail, multiplied in the same order."""
+    branch probabilities along k's trail, multiplied in the same order, times k's share of
+    its leaf."""
     node = 0
     prob = 1.0
     path = trail[k]
@@ -471,4 +565,4 @@ def pmf_of(nodes, child, trail, trail_depth, k: int, x, n) -> float:
         else:
             node = first
             prob *= i0 / total
-    return prob
+    return prob if span[node] == 1 else prob * share[k]

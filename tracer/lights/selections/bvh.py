@@ -82,6 +82,8 @@ class BvhTables(NamedTuple):
 
     nodes: np.ndarray
     child: np.ndarray
+    span: np.ndarray
+    share: np.ndarray
     trail: np.ndarray
     trail_depth: np.ndarray
     pmf: np.ndarray
@@ -98,7 +100,8 @@ def tables(candidates) -> BvhTables:
     if infinite[:bounded].any():
         raise ValueError("the lights at infinity must be the last candidates")
     built = tree.build(candidates.lo[:bounded], candidates.hi[:bounded], candidates.axis[:bounded],
-                       candidates.cos_o[:bounded], np.zeros(bounded), candidates.flux[:bounded])
+                       candidates.cos_o[:bounded], np.zeros(bounded), candidates.flux[:bounded],
+                       candidates.owner[:bounded])
     rows = np.zeros((len(infinite) - bounded, 4))
     for j, k in enumerate(range(bounded, len(infinite))):
         irradiance = candidates.flux[k] / (np.pi * scene_radius(candidates.lo[k], candidates.hi[k]) ** 2)
@@ -107,7 +110,8 @@ def tables(candidates) -> BvhTables:
             rows[j, TOWARD:TOWARD + 3] = -candidates.axis[k]
         else:  # every direction (the environment): the mean over receiver normals
             rows[j, WEIGHT] = 0.25 * np.pi * irradiance
-    return BvhTables(np.ascontiguousarray(built.nodes), built.child, built.trail, built.trail_depth,
+    return BvhTables(np.ascontiguousarray(built.nodes), built.child, built.span, built.share, built.trail,
+                     built.trail_depth,
                      alias_tables("power", candidates).pmf, rows)
 
 
@@ -121,34 +125,39 @@ def _infinite_weight(rows, j: int, n) -> float:
 
 
 @jit
-def _tree_share(sel, x, n):
+def _tree_share(nodes, infinite, x, n):
     """``(p_tree, total)``: the probability of descending the tree at ``(x, n)`` and the sum
-    of the weights (0: no light can reach x). Without lights at infinity, 1 (the descent
-    alone), as before they were kept out."""
-    if len(sel.infinite) == 0:
-        return (1.0, 1.0) if len(sel.nodes) > 0 else (0.0, 0.0)
-    w_tree = tree.importance(sel.nodes, 0, x, n) if len(sel.nodes) > 0 else 0.0
+    of the weights (0: no light can reach x), with lights at infinity (rows ``infinite``)."""
+    w_tree = tree.importance(nodes, 0, x, n) if len(nodes) > 0 else 0.0
     total = w_tree
-    for j in range(len(sel.infinite)):
-        total += _infinite_weight(sel.infinite, j, n)
+    for j in range(len(infinite)):
+        total += _infinite_weight(infinite, j, n)
     if not total > 0.0:
         return 0.0, 0.0
     return w_tree / total, total
 
 
+# Both functions go straight to the tree where there are no lights at infinity (most scenes), and
+# read the tables' arrays once: each array passed on inside the per-lane code costs numba
+# reference counts, and the general path cost the descent of a one-leaf tree 80 ns against 20.
 @jit
 def choose(sel, x, n_receiver, u: float):
-    p_tree, total = _tree_share(sel, x, n_receiver)
+    nodes, infinite = sel.nodes, sel.infinite
+    if len(infinite) == 0:  # the descent alone
+        if len(nodes) == 0:
+            return -1, 0.0
+        return tree.choose(nodes, sel.child, sel.span, sel.share, x, n_receiver, u)
+    p_tree, total = _tree_share(nodes, infinite, x, n_receiver)
     if not total > 0.0:
         return -1, 0.0
     if u < p_tree:
-        k, p = tree.choose(sel.nodes, sel.child, x, n_receiver, reuse(u, p_tree, True))
+        k, p = tree.choose(nodes, sel.child, sel.span, sel.share, x, n_receiver, reuse(u, p_tree, True))
         return k, p * p_tree
     # A light at infinity, by the running sum of their probabilities from p_tree (the last
     # one of positive weight takes what rounding leaves above the sum).
     first, running, last, p_last = len(sel.trail), p_tree, -1, 0.0
-    for j in range(len(sel.infinite)):
-        p = _infinite_weight(sel.infinite, j, n_receiver) / total
+    for j in range(len(infinite)):
+        p = _infinite_weight(infinite, j, n_receiver) / total
         if p > 0.0:
             running += p
             last, p_last = j, p
@@ -159,12 +168,19 @@ def choose(sel, x, n_receiver, u: float):
 
 @jit
 def pmf(sel, k: int, x, n_receiver) -> float:
-    p_tree, total = _tree_share(sel, x, n_receiver)
+    nodes, infinite = sel.nodes, sel.infinite
+    if len(infinite) == 0:
+        if len(nodes) == 0:
+            return 0.0
+        return tree.pmf_of(nodes, sel.child, sel.span, sel.share, sel.trail, sel.trail_depth, k, x,
+                           n_receiver)
+    p_tree, total = _tree_share(nodes, infinite, x, n_receiver)
     if not total > 0.0:
         return 0.0
     first = len(sel.trail)
     if k >= first:
-        return _infinite_weight(sel.infinite, k - first, n_receiver) / total
+        return _infinite_weight(infinite, k - first, n_receiver) / total
     if not p_tree > 0.0:
         return 0.0
-    return tree.pmf_of(sel.nodes, sel.child, sel.trail, sel.trail_depth, k, x, n_receiver) * p_tree
+    return tree.pmf_of(nodes, sel.child, sel.span, sel.share, sel.trail, sel.trail_depth, k, x,
+                       n_receiver) * p_tree
