@@ -28,7 +28,7 @@ DEFAULT_SCENES = ["cornell", "veach_mis", "many_lights", "big_light", "tiny_ligh
                   str(HERE.parent / "tracer/scenes/mitsuba/cornell_box.xml")]
 
 
-def work_counts(strategy, lanes: int, shadow: int, direction: int, lights: int) -> dict[str, float]:
+def work_counts(strategy, lanes: int, shadow: int, direction: int, levels: float) -> dict[str, float]:
     """What a camera sample of ``strategy`` did in the pilot, per lane, by the terms of
     ``tracer.auto.cost_per_sample`` (``COSTS``'s keys)."""
     from tracer import auto
@@ -39,7 +39,7 @@ def work_counts(strategy, lanes: int, shadow: int, direction: int, lights: int) 
             "shadow_ray": shadow / lanes, "direction_ray": direction / lanes,
             "solid-angle": light if strategy.light_sampling == "solid-angle" else 0.0,
             "solid-angle-cos": light if strategy.light_sampling == "solid-angle-cos" else 0.0,
-            "bvh_level": auto.bvh_levels(lights) * (light + direction / lanes) if bvh else 0.0}
+            "bvh_level": levels * (light + direction / lanes) if bvh else 0.0}
 
 
 TERMS = ("camera", "shading", "shadow_ray", "direction_ray", "solid-angle", "solid-angle-cos", "bvh_level")
@@ -114,7 +114,8 @@ def main() -> int:
                 est.shade_lanes(origins, dirs, sampler, pixel, sample, rays=rays)
                 times[s].append(time.perf_counter() - t0)
                 counts[s] = work_counts(s, len(pixel), sum(r[0] for r in rays), sum(r[1] for r in rays),
-                                        len(estimators[s].lights.tables.technique))
+                                        auto.bvh_levels(estimators[s].lights.tables.selection.trail_depth)
+                                        if s.light_selection == "bvh" else 1.0)
         for s in strategies:
             rows.append({"scene": Path(name).stem, "strategy": s.slug, "seconds_per_lane":
                          statistics.median(times[s]) / len(pixel), **counts[s]})

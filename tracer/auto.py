@@ -88,15 +88,19 @@ COSTS = {
     "solid-angle-cos": 0.95,  # its cosine-warped variant
     # A level of a light BVH descent (per light sample, and per MIS direction ray): the fit gave
     # 4.77 a descent on many_lights, the only fitted scene with BVH candidates, whose tree of 2,248
-    # lights has bvh_levels = 12; a descent's work grows with its depth (two child importances a
-    # level), so a tree of a few lights costs a fraction of that.
+    # lights was then counted as 12 levels (bvh_levels gives 12.4 for its tree today); a
+    # descent's work grows with its depth (two child importances a level), so a tree of a few
+    # lights costs a fraction of that.
     "bvh_level": 4.77 / 12,
 }
 
 
-def bvh_levels(lights: int) -> int:
-    """Levels of a light BVH descent over ``lights`` candidates (a binary tree: ceil(log2))."""
-    return max(1, math.ceil(math.log2(max(lights, 1))))
+def bvh_levels(trail_depth: np.ndarray) -> float:
+    """The work of a light BVH descent, in levels: the mean depth of its candidates' leaves
+    (``trail_depth (K,)``; where a descent ends depends on the point, so no candidate is
+    weighted above another), plus one for the pick within the leaf and the entry to the tree
+    (``benchmarks/light_pick.py`` measured about as much for a tree of one leaf as for a level)."""
+    return 1.0 + (float(np.mean(trail_depth)) if len(trail_depth) else 0.0)
 
 
 @dataclass(frozen=True)
@@ -247,10 +251,10 @@ def relmse_estimates(means: np.ndarray, variances: np.ndarray, spp: int) -> np.n
 
 
 def cost_per_sample(strategy: Strategy, lanes: int, shadow_rays: int, direction_rays: int,
-                    lights: int = 1) -> float:
+                    levels: float = 1.0) -> float:
     """Cost of one camera sample of ``strategy`` (``COSTS``'s units) from a pilot of ``lanes``
-    camera samples that cast ``shadow_rays`` and ``direction_rays``, on a scene of ``lights``
-    light candidates (the depth of its BVH)."""
+    camera samples that cast ``shadow_rays`` and ``direction_rays``; ``levels``: the work of
+    its light BVH's descent (:func:`bvh_levels`), if it selects by one."""
     lanes = max(lanes, 1)
     cost = (COSTS["camera"] + COSTS["shading"] * (strategy.light_count + strategy.direction_count)
             + COSTS["shadow_ray"] * shadow_rays / lanes + COSTS["direction_ray"] * direction_rays / lanes)
@@ -259,7 +263,7 @@ def cost_per_sample(strategy: Strategy, lanes: int, shadow_rays: int, direction_
         if strategy.light_selection == "bvh":
             # A light sample descends the tree; an MIS direction ray asks it for the pmf of the
             # light it meets (counted per direction ray: a bound).
-            cost += COSTS["bvh_level"] * bvh_levels(lights) * (strategy.light_count + direction_rays / lanes)
+            cost += COSTS["bvh_level"] * levels * (strategy.light_count + direction_rays / lanes)
     return cost
 
 
@@ -323,7 +327,9 @@ def measure(scene: Scene, strategy: Strategy, pixel_set: np.ndarray, seed: int, 
         moments = moments.reshape(len(pixel_set), spp, 3).mean(axis=1)
     shadow = sum(r[0] for r in rays)
     direction = sum(r[1] for r in rays)
-    cost = cost_per_sample(strategy, len(pixel), shadow, direction, len(estimator.lights.tables.technique))
+    selection = estimator.lights.tables.selection
+    levels = bvh_levels(selection.trail_depth) if strategy.light_selection == "bvh" else 1.0
+    cost = cost_per_sample(strategy, len(pixel), shadow, direction, levels)
     return Pilot(radiance.mean(axis=1), radiance.var(axis=1, ddof=1), cost, moments)
 
 
