@@ -2,7 +2,8 @@
 them for (issue 34).
 
     python benchmarks/equal_time.py [--time 2] [--seeds 3] [--width 160] [--scene-seed SEED]
-                                    [--corpus /tmp/corpus] [--only cbox,city] [--out DIR]
+                                    [--corpus /tmp/corpus] [--only cbox,city]
+                                    [--strategies mis_bvh,auto] [--out DIR]
 
 Scenes:
 
@@ -38,6 +39,7 @@ OUT/equal_time.md.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import platform
 import sys
@@ -220,7 +222,8 @@ def markdown(doc: dict) -> str:
                 text = f"*{text}*"
             cells.append(text)
         lines.append(f"| {scene} | " + " | ".join(cells) + " |")
-    lines += ["", "`auto` against the best fixed strategy of each scene (independent sampler; efficiency "
+    auto_rows = {scene: rows for scene, rows in doc["results"].items() if "auto" in rows}
+    lines += [] if not auto_rows else ["", "`auto` against the best fixed strategy of each scene (independent sampler; efficiency "
               "over the best's, geometric mean over seeds), what it chose, and `auto` with the Sobol "
               "sampler against `mis` with it. The last column is the reference's own relMSE over the "
               "least relMSE of the scene's runs: above about 1 the reference's noise, which is "
@@ -230,15 +233,18 @@ def markdown(doc: dict) -> str:
               "noisy ratios is biased upward.", "",
               "| scene | best fixed | auto / best | auto / mis | auto chose | auto_sobol / mis_sobol | "
               "reference / best relMSE |", "|---|---|---:|---:|---|---:|---:|"]
-    for scene, rows in doc["results"].items():
+    for scene, rows in auto_rows.items():
         fixed = {k: v for k, v in rows.items() if k not in NOT_FIXED}
         best = max(fixed, key=lambda k: fixed[k]["ratio"])
-        a, s = rows["auto"], rows["auto_sobol"]
+        a = rows["auto"]
         least = min(min(r["relmse"]) for r in rows.values())
         ratio, lo, hi = ratio_interval(a["efficiency"], fixed[best]["efficiency"])
+        sobol = (f"{rows['auto_sobol']['ratio'] / rows['mis_sobol']['ratio']:.2f}"
+                 if "auto_sobol" in rows and "mis_sobol" in rows else "-")
+        reference = doc["reference_relmse"].get(scene)
         lines.append(f"| {scene} | {best} | {ratio:.2f} [{lo:.2f}, {hi:.2f}] | {a['ratio']:.2f} | "
-                     f"{', '.join(sorted(set(a['chose'])))} | {s['ratio'] / rows['mis_sobol']['ratio']:.2f} | "
-                     f"{doc['reference_relmse'][scene] / least:.1f} |")
+                     f"{', '.join(sorted(set(a['chose'])))} | {sobol} | "
+                     f"{'-' if reference is None else f'{reference / least:.1f}'} |")
     lines += ["", "Where each strategy loses to `mis` at equal time (its interval below 1) and where it wins "
               "(above 1):", "", "| strategy | loses on | wins on |", "|---|---|---|"]
     for name in names[1:]:
@@ -257,6 +263,8 @@ def main() -> int:
     parser.add_argument("--scene-seed", type=int, default=None)
     parser.add_argument("--corpus", default="/tmp/corpus")
     parser.add_argument("--only", default="")
+    parser.add_argument("--strategies", default="", help="labels to run (comma-separated; mis, the "
+                        "baseline, always runs)")
     parser.add_argument("--out", default=str(HERE / "results"))
     args = parser.parse_args()
     if args.scene_seed is None:
@@ -270,6 +278,11 @@ def main() -> int:
     from tracer.study import metrics
     from tracer.study.compare import Comparison
 
+    wanted = {"mis", *filter(None, args.strategies.split(","))}
+    selected = [entry for entry in strategies() if not args.strategies or entry[0] in wanted]
+    unknown = wanted - {label for label, _, _ in strategies()}
+    if unknown:
+        parser.error(f"--strategies: no strategy labelled {', '.join(sorted(unknown))}")
     results: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
         files = scene_files(args, Path(tmp))
@@ -288,7 +301,7 @@ def main() -> int:
         for seed in range(args.seeds):
             for name, (scene, reference) in scenes.items():
                 comparison = Comparison(scene, reference, seed, 2)
-                for label, strategy, sampler in strategies():
+                for label, strategy, sampler in selected:
                     if not auto.sees_all_light(scene, strategy):
                         continue
                     run = comparison.equal_time(strategy, args.time, sampler)
@@ -315,10 +328,13 @@ def main() -> int:
            "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load "
                       f"{os.getloadavg()[0]:.2f} at the end",
            "command": "python " + " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
-           "strategies": [(label, s.slug, sampler) for label, s, sampler in strategies()],
+           "strategies": [(label, s.slug, sampler) for label, s, sampler in selected],
            "reference_relmse": reference_relmse,
            "results": results}
-    write_results(Path(args.out), "equal_time", doc, markdown(doc))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "equal_time.json").write_text(json.dumps(doc, indent=1) + "\n")  # first: the runs are kept
+    write_results(out, "equal_time", doc, markdown(doc))
     return 0
 
 
