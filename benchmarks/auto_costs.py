@@ -31,8 +31,6 @@ DEFAULT_SCENES = ["cornell", "veach_mis", "many_lights", "big_light", "tiny_ligh
 def work_counts(strategy, lanes: int, shadow: int, direction: int, levels: float) -> dict[str, float]:
     """What a camera sample of ``strategy`` did in the pilot, per lane, by the terms of
     ``tracer.auto.cost_per_sample`` (``COSTS``'s keys)."""
-    from tracer import auto
-
     light = strategy.light_count
     bvh = strategy.light_selection == "bvh" and light > 0
     return {"camera": 1.0, "shading": float(light + strategy.direction_count),

@@ -52,10 +52,14 @@ def measure(scene, reference, strategy, seeds: list[int], spp: int, seconds: flo
     return row
 
 
-def write_results(folder: Path, name: str, doc: dict, markdown: str) -> None:
-    """``folder/name.json`` (``doc``) and ``folder/name.md`` (``markdown``, also printed)."""
+def write_results(folder: Path, name: str, doc: dict, markdown) -> None:
+    """``folder/name.json`` (``doc``) and ``folder/name.md`` (``markdown``, also printed): the
+    text, or a function of ``doc`` that makes it, called once the JSON is written, so that a
+    failing table never loses a long run's numbers."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / f"{name}.json").write_text(json.dumps(doc, indent=1) + "\n")
+    if callable(markdown):
+        markdown = markdown(doc)
     (folder / f"{name}.md").write_text(markdown)
     print(markdown)
 

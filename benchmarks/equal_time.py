@@ -39,7 +39,6 @@ OUT/equal_time.md.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import sys
@@ -223,7 +222,8 @@ def markdown(doc: dict) -> str:
             cells.append(text)
         lines.append(f"| {scene} | " + " | ".join(cells) + " |")
     auto_rows = {scene: rows for scene, rows in doc["results"].items() if "auto" in rows}
-    lines += [] if not auto_rows else ["", "`auto` against the best fixed strategy of each scene (independent sampler; efficiency "
+    lines += [] if not auto_rows else [
+              "", "`auto` against the best fixed strategy of each scene (independent sampler; efficiency "
               "over the best's, geometric mean over seeds), what it chose, and `auto` with the Sobol "
               "sampler against `mis` with it. The last column is the reference's own relMSE over the "
               "least relMSE of the scene's runs: above about 1 the reference's noise, which is "
@@ -331,10 +331,7 @@ def main() -> int:
            "strategies": [(label, s.slug, sampler) for label, s, sampler in selected],
            "reference_relmse": reference_relmse,
            "results": results}
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "equal_time.json").write_text(json.dumps(doc, indent=1) + "\n")  # first: the runs are kept
-    write_results(out, "equal_time", doc, markdown(doc))
+    write_results(Path(args.out), "equal_time", doc, markdown)  # the JSON first: the runs are kept
     return 0
 
 

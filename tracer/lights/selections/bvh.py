@@ -111,8 +111,7 @@ def tables(candidates) -> BvhTables:
         else:  # every direction (the environment): the mean over receiver normals
             rows[j, WEIGHT] = 0.25 * np.pi * irradiance
     return BvhTables(np.ascontiguousarray(built.nodes), built.child, built.span, built.share, built.trail,
-                     built.trail_depth,
-                     alias_tables("power", candidates).pmf, rows)
+                     built.trail_depth, alias_tables("power", candidates).pmf, rows)
 
 
 @jit
