@@ -129,7 +129,7 @@ def build_times() -> dict:
     out = {"emitters": int(count)}
     for selection in ("power", "bvh"):
         start = time.perf_counter()
-        tables, _ = build_tables(scene, selection)
+        tables, _, _ = build_tables(scene, selection)
         out[f"tables_{selection}_seconds"] = time.perf_counter() - start
     lo = scene.vertices[scene.faces].min(axis=1)
     hi = scene.vertices[scene.faces].max(axis=1)

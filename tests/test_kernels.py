@@ -366,7 +366,7 @@ def test_every_light_technique_is_reached_by_its_own_branch(technique, write_sce
     served = [s for s in plugin.light_samplings if s != "*"] or ["area"]
     reached = 0
     for sampling in served:
-        tables, _ = build_tables(scene, "power", sampling)
+        tables, _, _ = build_tables(scene, "power", sampling)
         for k in np.flatnonzero(tables.technique == plugin.code):
             for _ in range(8):
                 x = (float(rng.uniform(-0.5, 0.5)), 0.0, float(rng.uniform(-0.5, 0.5)))

@@ -275,8 +275,51 @@ def test_api_renders_ris_and_bvh_and_records_them():
     image = tracer.render(scene, "ris", spp=2, ris_candidates=6, ris_sources="light+bsdf",
                           light_selection="bvh")
     record = image.film.record
-    assert (record.strategy, record.light_samples, record.bsdf_samples, record.light_selection) == \
-        ("ris", 3, 3, "bvh")
+    assert (record.strategy, record.light_samples, record.bsdf_samples, record.light_selection,
+            record.light_selection_ran) == ("ris", 3, 3, "bvh", None)
     assert np.all(np.isfinite(image.mean))
     with pytest.raises(ValueError, match="ris sources"):
         tracer.render(scene, "ris", spp=1, ris_sources="bsdf")
+
+
+def test_a_bvh_of_one_leaf_runs_as_power_with_the_same_probabilities(tmp_path, monkeypatch):
+    """A light BVH whose tree is one leaf, without lights at infinity, runs the ``power``
+    selection (its cheaper equivalent, ``bvh.runs_as``) and the render record says so. What
+    makes this exact is checked on the tree itself (``runs_as`` switched off): with a trapezoid
+    light of two triangles of areas 1.5 and 1 (one leaf, shares 0.6 and 0.4), at 2,000 random
+    shading points and normals, its pmf of each triangle is power's up to float rounding,
+    everywhere (a leaf's members are picked by share, with no bound to test). Deterministic:
+    no tolerance beyond rounding. A scene of many leaves keeps its tree."""
+    import tracer
+    from tracer.lights.selections import bvh as bvh_selection
+    from tracer.record import RenderRecord
+
+    (tmp_path / "light.obj").write_text("v 0 2 0\nv 3 2 0\nv 2 2 1\nv 0 2 1\nf 1 2 3\nf 1 3 4\n")
+    description = {
+        "camera": {"origin": [1.5, 1.0, 5.0], "target": [1.5, 0.5, 0.0], "fov": 60.0, "width": 8, "height": 8},
+        "materials": {"floor": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+        "shapes": [{"type": "quad", "origin": [-5.0, 0.0, -5.0], "edge1": [0.0, 0.0, 10.0],
+                    "edge2": [10.0, 0.0, 0.0], "material": "floor"},
+                   {"type": "mesh", "file": str(tmp_path / "light.obj"), "emission": [4.0, 3.0, 2.0]}]}
+    scene = load_scene(description)
+    power, ran = LightSampler(scene, "power"), LightSampler(scene, "bvh")
+    assert (ran.requested, ran.selection) == ("bvh", "power")
+    assert np.array_equal(ran.tables.selection.pmf, power.tables.selection.pmf)
+    assert np.allclose(power.pmf, [0.6, 0.4], rtol=1e-12)
+    assert LightSampler(load_scene(many_light_scene()), "bvh").selection == "bvh"
+
+    monkeypatch.setattr(bvh_selection, "runs_as", lambda tables: None)
+    tree = LightSampler(scene, "bvh")
+    assert tree.selection == "bvh" and len(tree.tables.selection.nodes) == 1
+    rng = np.random.default_rng(2)
+    count = 2_000
+    x = np.column_stack([rng.uniform(-2, 5, count), rng.uniform(0.0, 3.0, count), rng.uniform(-2, 3, count)])
+    n = _random_unit(rng, count)
+    for k in (0, 1):
+        assert np.allclose(tree.selection_pmf(np.full(count, k), x, n), power.pmf[k], rtol=1e-12, atol=0.0)
+
+    monkeypatch.undo()
+    record = tracer.render(scene, "mis", spp=1, light_selection="bvh").film.record
+    assert (record.light_selection, record.light_selection_ran) == ("bvh", "power")
+    assert RenderRecord.from_attributes(record.attributes(), spp=1).light_selection_ran == "power"
+    assert tracer.render(scene, "mis", spp=1).film.record.light_selection_ran is None

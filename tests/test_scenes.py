@@ -120,7 +120,7 @@ def test_a_light_too_small_for_float32_is_left_out_of_the_light_table():
                    {"type": "quad", "origin": [-1.0, 1.0, -1.0], "edge1": [2.0, 0.0, 0.0],
                     "edge2": [0.0, 0.0, 2.0], "emission": [1.0, 1.0, 1.0]}],
     })
-    tables, owner = build_tables(scene)
+    tables, owner, _ = build_tables(scene)
     assert np.all(np.isfinite(tables.rows)) and set(owner.tolist()) == {1}
 
 

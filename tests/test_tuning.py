@@ -199,6 +199,9 @@ def test_settings_that_cannot_learn_are_refused(args, words, tmp_path, capsys):
     assert status == 2 and words in err and len(err.strip().splitlines()) == 1, err
 
 
+# A claim of efficiency, not of correctness (unbiasedness on these cases is test_stability's),
+# and 15 s of the 15-minute CI budget: run with -m slow.
+@pytest.mark.slow
 def test_learning_is_not_worse_than_balance_beyond_its_noise_on_the_stability_cases():
     """On every stability case (the failure cases of each technique: tiny, huge, grazing and
     occluded lights, mirrors, near-specular lobes, point lights, degenerate meshes), optimal MIS

@@ -328,7 +328,8 @@ def measure(scene: Scene, strategy: Strategy, pixel_set: np.ndarray, seed: int, 
     shadow = sum(r[0] for r in rays)
     direction = sum(r[1] for r in rays)
     selection = estimator.lights.tables.selection
-    levels = bvh_levels(selection.trail_depth) if strategy.light_selection == "bvh" else 1.0
+    # A bvh selection that runs as power (one leaf, tracer.lights.build_tables) descends nothing.
+    levels = bvh_levels(selection.trail_depth) if estimator.lights.selection == "bvh" else 0.0
     cost = cost_per_sample(strategy, len(pixel), shadow, direction, levels)
     return Pilot(radiance.mean(axis=1), radiance.var(axis=1, ddof=1), cost, moments)
 

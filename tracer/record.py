@@ -95,6 +95,10 @@ class RenderRecord:
     auto : for a render of ``--strategy auto``, what its pilot measured (``tracer.auto.Choice.
         summary``: each candidate's efficiency relative to the strategy above, which it chose);
         None otherwise. Informative: renders pool by the strategy they ran.
+    light_selection_ran : the selection the kernels ran where it differs from
+        ``light_selection`` (``bvh`` on one leaf and no lights at infinity runs ``power``, which
+        has the same probabilities: ``tracer.lights.build_tables``); None otherwise.
+        Informative: it follows from the scene and the selection.
     """
 
     strategy: str | None = None
@@ -113,6 +117,7 @@ class RenderRecord:
     scene_digest: str | None = None
     version: str | None = None
     auto: str | None = None
+    light_selection_ran: str | None = None
 
     @classmethod
     def of_render(cls, strategy: Any, sampler: str, seed: int, first_sample: int, spp: int,

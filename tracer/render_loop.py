@@ -333,6 +333,8 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
     film.record = _record(scene, runs, settings, first, drawn, seconds, earlier)
     if choice is not None or (earlier is not None and earlier.auto):
         film.record = replace(film.record, auto=choice.summary() if choice else earlier.auto)
+    if estimator is not None and estimator.lights.selection != estimator.lights.requested:
+        film.record = replace(film.record, light_selection_ran=estimator.lights.selection)
     learner = hook.learner if hook is not None else (learner if runs.learns else None)
     if learner is not None:
         film.learned = learner.maps()

@@ -121,7 +121,7 @@ class DirectLighting:
         materials = tuple(by_code[k].name for k in sorted(set(self.surfaces.material_kind.tolist()))
                           if k in by_code)
         strategy = self.strategy
-        features = FeatureSet(materials, technique_names(self.lights.tables), strategy.light_selection,
+        features = FeatureSet(materials, technique_names(self.lights.tables), self.lights.selection,
                               sampler, strategy.direction_technique if strategy.direction_count else None,
                               self.combiner.name, bool(strategy.light_count), bool(strategy.direction_count),
                               strategy.learns, textures=self.scene.textures.shading,

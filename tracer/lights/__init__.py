@@ -207,9 +207,11 @@ def _triangle_records(scene, tri: np.ndarray, texels: np.ndarray, chosen: dict) 
 
 
 def build_tables(scene, light_selection: str = "power", light_sampling: str = "area",
-                 environment_sampling: str = "luminance") -> tuple[LightTables, np.ndarray]:
-    """The light tables of ``scene`` (a ``tracer.scene.Scene``), and ``(K,)`` the shape index of
-    each candidate (-1 - i for point light i).
+                 environment_sampling: str = "luminance") -> tuple[LightTables, np.ndarray, str]:
+    """The light tables of ``scene`` (a ``tracer.scene.Scene``), ``(K,)`` the shape index of
+    each candidate (-1 - i for point light i), and the selection the tables are for:
+    ``light_selection``, or the cheaper one it runs as on these candidates (its ``runs_as``,
+    ``tracer.lights.selections``).
 
     Candidates (``tracer.lights.emitters``): every emitting triangle of positive area (a
     textured one is a ``textured_triangle`` where the light sampling has a technique for those;
@@ -267,6 +269,9 @@ def build_tables(scene, light_selection: str = "power", light_sampling: str = "a
         first += len(record)
     candidates = emitters.Candidates.of(ordered)
     tables = selection.functions().tables(candidates)
+    ran = getattr(selection.functions(), "runs_as", lambda _: None)(tables) or light_selection
+    if ran != light_selection:
+        tables = plugins.get("light_selection", ran).functions().tables(candidates)
     # Bounding spheres for the culling of direction rays: one per emissive shape (a rectangle's
     # two triangles bound it exactly).
     spheres = emitter_spheres(scene.vertices[scene.faces[tri]], scene.shape_of_triangle[tri],
@@ -274,7 +279,7 @@ def build_tables(scene, light_selection: str = "power", light_sampling: str = "a
     environment = environment_light.table(scene.environment, environment_candidate, environment_sampling)
     rows = np.concatenate([rows, *appended]) if appended else rows
     return LightTables(tables, technique, np.ascontiguousarray(rows), candidate_of_prim, spheres,
-                       environment, prims), candidates.owner
+                       environment, prims), candidates.owner, ran
 
 
 def technique_names(tables: LightTables) -> tuple[str, ...]:
@@ -312,15 +317,16 @@ class LightSampler:
 
     tables : the ``LightTables`` the kernels read.   owner : (K,) shape index of each
     candidate (-1 - i for point light i).   pmf : (K,) selection probabilities by power (the
-    ``bvh`` selection's depend on the point).
+    ``bvh`` selection's depend on the point).   requested : the selection asked for.
+    selection : the one the tables are for and the kernels run (``build_tables``).
     """
 
     def __init__(self, scene, selection: str = "power", sampling: str = "area",
                  environment_sampling: str = "luminance"):
         self.scene = scene
-        self.selection = selection
+        self.requested = selection
         self.sampling = sampling
-        self.tables, self.owner = build_tables(scene, selection, sampling, environment_sampling)
+        self.tables, self.owner, self.selection = build_tables(scene, selection, sampling, environment_sampling)
         self.pmf = self.tables.selection.pmf
         self.count = len(self.pmf)
 

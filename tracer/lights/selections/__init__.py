@@ -11,7 +11,12 @@ Each module is a plug-in (``tracer.plugins.LightSelection``, pbrt-v4's two-metho
   ``(-1, 0.0)`` if none can light ``x``;
 - ``pmf(tables, k, x, n_receiver) -> float`` (compiled): the probability that ``choose`` picks
   ``k`` at ``x``, computed as ``choose`` computes it, so that MIS weighs a BSDF sample that hits
-  a light with the very probability the light technique would have chosen it.
+  a light with the very probability the light technique would have chosen it;
+- optionally ``runs_as(tables) -> str | None``: the name of a cheaper selection whose choices
+  have the same probabilities as this one's at every point some light can reach, for these
+  tables (a light BVH of one leaf and no lights at infinity picks by power, as ``power`` does,
+  after an importance bound it does not need), or None. ``tracer.lights.build_tables`` then
+  builds and runs that one, and the render record says so (``light_selection_ran``).
 
 ==========  ==============================================================================
 selection   module
