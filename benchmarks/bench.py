@@ -139,7 +139,8 @@ def time_tracer(scene_path: str, size: int, spp: int, strategy: str, threads: in
 
 @dataclass
 class Call:
-    """One embreex query as tracer made it: float32 arrays, tmax only for shadow rays."""
+    """One embreex query as tracer made it: float32 arrays; tmax for shadow rays, and for
+    closest hits in scenes with analytic spheres (up to the nearest one)."""
 
     kind: str
     origins: object
@@ -189,9 +190,9 @@ def _recording_classes():
             calls.append(Call(kind, np.array(origins, dtype=np.float32), np.array(dirs, dtype=np.float32),
                               None if tmax is None else np.array(tmax, dtype=np.float32)))
 
-        def first_hit(self, origins, dirs):
-            self._record("closest", origins, dirs)
-            return super().first_hit(origins, dirs)
+        def first_hit(self, origins, dirs, tmax=None):
+            self._record("closest", origins, dirs, tmax)
+            return super().first_hit(origins, dirs, tmax)
 
         def intersect(self, origins, dirs):
             raise RuntimeError("DirectLighting called RayCaster.intersect: tracer's render loop "
@@ -204,10 +205,10 @@ def _recording_classes():
     class RecordingEstimator(DirectLighting):
         """DirectLighting whose shade_lanes() (one call per render batch) brackets a batch."""
 
-        def shade_lanes(self, origins, dirs, sampler, pixel, sample):
+        def shade_lanes(self, *args, **kwargs):
             self.caster.begin_batch()
             try:
-                return super().shade_lanes(origins, dirs, sampler, pixel, sample)
+                return super().shade_lanes(*args, **kwargs)
             finally:
                 self.caster.end_batch()
 
@@ -230,10 +231,12 @@ def replay(embree_scene, batches: list[list[Call]], threads: int) -> tuple[float
         spent = dict.fromkeys(RAY_KINDS, 0.0)
         for call, tmax in zip(batches[index], dists[index], strict=True):
             start = time.perf_counter()
-            if tmax is None:
-                embree_scene.run(call.origins, call.dirs)
-            else:
+            if call.kind == "shadow":
                 embree_scene.run(call.origins, call.dirs, dists=tmax, query="OCCLUDED")
+            elif tmax is None:
+                embree_scene.run(call.origins, call.dirs)
+            else:  # a closest hit up to the nearest analytic sphere (SceneRays.first_hit)
+                embree_scene.run(call.origins, call.dirs, dists=tmax)
             spent[call.kind] += time.perf_counter() - start
         return spent
 

@@ -57,14 +57,18 @@ class RayCaster:
         t[prim < 0] = np.inf
         return Hits(prim, t, out["u"], out["v"])
 
-    def first_hit(self, origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        """(n,) int32 index of the triangle each ray hits first, -1 on a miss. About 10% faster
-        than :meth:`intersect`, whose full output also builds t, u, v and the normal; the
-        estimator recomputes the hit distance from the triangle's plane in float64."""
+    def first_hit(self, origins: np.ndarray, dirs: np.ndarray, tmax: np.ndarray | None = None) -> np.ndarray:
+        """(n,) int32 index of the triangle each ray hits first, -1 on a miss; with ``tmax
+        (n,)``, among the hits at t <= tmax only. Faster than :meth:`intersect`, whose full
+        output also builds t, u, v and the normal; the estimator recomputes the hit distance
+        from the triangle's plane in float64."""
         n = len(origins)
         if self.empty or n == 0:
             return np.full(n, -1, dtype=np.int32)
-        return self._scene.run(_f32(origins), _f32(dirs))
+        if tmax is None:
+            return self._scene.run(_f32(origins), _f32(dirs))
+        # embreex overwrites ``dists`` in place, so it always gets a fresh array.
+        return self._scene.run(_f32(origins), _f32(dirs), dists=np.array(tmax, dtype=np.float32))
 
     def occluded(self, origins: np.ndarray, dirs: np.ndarray, tmax: np.ndarray) -> np.ndarray:
         """(n,) bool: something lies on the segment origin + t dir, 0 <= t < tmax."""
