@@ -30,9 +30,10 @@ DEFAULT_SCENES = ["cornell", "veach_mis", "many_lights", "big_light", "tiny_ligh
 
 def work_counts(strategy, lanes: int, shadow: int, direction: int, levels: float) -> dict[str, float]:
     """What a camera sample of ``strategy`` did in the pilot, per lane, by the terms of
-    ``tracer.auto.cost_per_sample`` (``COSTS``'s keys)."""
+    ``tracer.auto.cost_per_sample`` (``COSTS``'s keys); ``levels``: the light BVH's descent
+    (``auto.bvh_levels``), 0 where none runs (a ``bvh`` that runs as ``power``)."""
     light = strategy.light_count
-    bvh = strategy.light_selection == "bvh" and light > 0
+    bvh = strategy.light_selection == "bvh" and light > 0 and levels > 0.0
     return {"camera": 1.0, "shading": float(light + strategy.direction_count),
             "shadow_ray": shadow / lanes, "direction_ray": direction / lanes,
             "solid-angle": light if strategy.light_sampling == "solid-angle" else 0.0,
@@ -112,8 +113,8 @@ def main() -> int:
                 est.shade_lanes(origins, dirs, sampler, pixel, sample, rays=rays)
                 times[s].append(time.perf_counter() - t0)
                 counts[s] = work_counts(s, len(pixel), sum(r[0] for r in rays), sum(r[1] for r in rays),
-                                        auto.bvh_levels(estimators[s].lights.tables.selection.trail_depth)
-                                        if s.light_selection == "bvh" else 1.0)
+                                        auto.bvh_levels(est.lights.tables.selection.trail_depth)
+                                        if est.lights.selection == "bvh" else 0.0)
         for s in strategies:
             rows.append({"scene": Path(name).stem, "strategy": s.slug, "seconds_per_lane":
                          statistics.median(times[s]) / len(pixel), **counts[s]})

@@ -307,6 +307,13 @@ def test_a_bvh_of_one_leaf_runs_as_power_with_the_same_probabilities(tmp_path, m
     assert np.array_equal(ran.tables.selection.pmf, power.tables.selection.pmf)
     assert np.allclose(power.pmf, [0.6, 0.4], rtol=1e-12)
     assert LightSampler(load_scene(many_light_scene()), "bvh").selection == "bvh"
+    # With a light at infinity the selection chooses between it and the tree by the point: bvh.
+    assert LightSampler(load_scene({**description, "environment": {"radiance": [0.2, 0.2, 0.2]}}),
+                        "bvh").selection == "bvh"
+    # auto does not pilot the bvh candidates where they would be the power ones again.
+    from tracer import auto
+    from tracer.strategy import Strategy
+    assert not any(s.light_selection == "bvh" for s in auto.candidates(scene, Strategy("auto")))
 
     monkeypatch.setattr(bvh_selection, "runs_as", lambda tables: None)
     tree = LightSampler(scene, "bvh")
@@ -322,4 +329,10 @@ def test_a_bvh_of_one_leaf_runs_as_power_with_the_same_probabilities(tmp_path, m
     record = tracer.render(scene, "mis", spp=1, light_selection="bvh").film.record
     assert (record.light_selection, record.light_selection_ran) == ("bvh", "power")
     assert RenderRecord.from_attributes(record.attributes(), spp=1).light_selection_ran == "power"
+    # A merge keeps it only where both files say the same (older files say nothing).
+    from dataclasses import replace
+    from tracer.record import merged
+    later = replace(record, samples=((record.samples[0][0] + 1, 0, 1),))
+    assert merged(record, later).light_selection_ran == "power"
+    assert merged(replace(record, light_selection_ran=None), later).light_selection_ran is None
     assert tracer.render(scene, "mis", spp=1).film.record.light_selection_ran is None

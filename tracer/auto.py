@@ -179,14 +179,17 @@ def candidates(scene: Scene, auto: Strategy) -> list[Strategy]:
     # The BVH is worth a pilot where there are lights to choose between: counted where they are
     # fewest (a quad light is two triangles to area sampling but one rectangle to solid-angle).
     emitters = min(len(t.technique) for t in tables.values())
-    selections = ["power"] + (["bvh"] if emitters >= BVH_MIN_LIGHTS else [])
     seen: set[tuple[str, ...]] = set()
     for sampling, light_tables in tables.items():
         techniques = technique_names(light_tables)
         if techniques in seen:
             continue
         seen.add(techniques)
-        for selection in selections:
+        # Not where the BVH would run as power (a tree of one leaf: ``lights.build_tables``),
+        # which would be the power candidate's pilot twice.
+        tree = emitters >= BVH_MIN_LIGHTS and \
+            LightSampler(scene, "bvh", sampling, auto.environment_sampling).selection == "bvh"
+        for selection in ["power"] + (["bvh"] if tree else []):
             chosen = dict(light_sampling=sampling, light_selection=selection, **kept)
             out.append(Strategy("mis", light_samples=n_light, bsdf_samples=n_dir, **chosen))
             out.append(Strategy("light", light_samples=n_light, bsdf_samples=0, light_sampling=sampling,

@@ -321,4 +321,8 @@ def merged(a: RenderRecord, b: RenderRecord) -> RenderRecord:
                                seconds=(a.seconds or 0.0) + (b.seconds or 0.0),
                                # A file without a digest was matched by scene name only; the
                                # digest that is known stays, so that later pools still check it.
-                               scene_digest=a.scene_digest or b.scene_digest)
+                               scene_digest=a.scene_digest or b.scene_digest,
+                               # Informative: kept where both say the same (files from before
+                               # the field existed say nothing).
+                               light_selection_ran=a.light_selection_ran
+                               if a.light_selection_ran == b.light_selection_ran else None)
