@@ -52,3 +52,35 @@ def test_first_hit_is_the_nearest_of_triangles_and_spheres():
     # Every kind of answer occurs: spheres, triangles (some behind a sphere), misses (the box is open).
     assert (expected >= rays.first_sphere).sum() > 500 and (both & (t_nearest > t_triangle)).sum() > 100
     assert 0 < (expected < 0).sum()
+
+
+def test_first_hit_without_triangles_with_emitters_only_and_with_no_rays():
+    """The edge cases of the same query: a scene of spheres alone (Embree holds no triangle, and
+    every hit is a sphere's), the emitters-only rays ris uses (local ids mapped back to the
+    scene's: an emitting sphere behind an emitting quad is found through the occluder that the
+    emitters-only scene leaves out), and an empty batch (an int32 array of length 0)."""
+    spheres_only = load_scene({"camera": {"origin": [0, 0, 5], "target": [0, 0, 0], "fov": 40.0, "width": 4,
+                                          "height": 4},
+                               "shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1.0},
+                                          {"type": "sphere", "center": [0, 0, -3], "radius": 1.0}]})
+    rays = SceneRays(spheres_only)
+    origins = np.array([[0, 0, 5], [0, 0, 5], [5, 0, 0]], dtype=np.float32)
+    dirs = np.array([[0, 0, -1], [0, 1, 0], [-1, 0, 0]], dtype=np.float32)
+    assert rays.first_hit(origins, dirs).tolist() == [rays.first_sphere, -1, rays.first_sphere]
+    empty = rays.first_hit(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32))
+    assert empty.dtype == np.int32 and empty.shape == (0,)
+
+    mixed = load_scene({"camera": {"origin": [0, 0, 5], "target": [0, 0, 0], "fov": 40.0, "width": 4, "height": 4},
+                        "shapes": [{"type": "quad", "origin": [-2, -2, 2], "edge1": [4, 0, 0], "edge2": [0, 4, 0]},
+                                   {"type": "quad", "origin": [-2, -2, -1], "edge1": [4, 0, 0], "edge2": [0, 4, 0],
+                                    "emission": [1, 1, 1]},
+                                   {"type": "sphere", "center": [0, 0, 0.5], "radius": 0.5,
+                                    "emission": [2, 2, 2]}]})
+    full, emitters = SceneRays(mixed), SceneRays(mixed, emitters_only=True)
+    origins = np.array([[0, 0, 5], [1.5, 1.5, 5]], dtype=np.float32)
+    dirs = np.array([[0, 0, -1], [0, 0, -1]], dtype=np.float32)
+    occluder = full.first_hit(origins, dirs)
+    assert np.all((occluder >= 0) & (occluder < 2))  # the plain quad's two triangles, in front
+    found = emitters.first_hit(origins, dirs)
+    sphere = mixed.triangle_count  # the scene's id of its first sphere
+    assert found[0] == sphere and 2 <= found[1] < 4  # the sphere; beside it, the emitting quad
