@@ -10,7 +10,8 @@ N, M, heuristic and environment sampling): ``mis`` (N light + M BSDF samples) an
 for every light sampling whose techniques differ on this scene (``area``, ``solid-angle``,
 ``solid-angle-cos``: on a scene of triangles only, the last two are the same technique) and
 every light selection worth trying (``power``; ``bvh`` too from ``BVH_MIN_LIGHTS`` (2) lights,
-counted where they are fewest: a quad is one light to solid-angle sampling), and
+counted where they are fewest: a quad is one light to solid-angle sampling, and where its tree
+has more than one leaf: one leaf runs as ``power``, ``lights.build_tables``), and
 ``bsdf`` (M). Only strategies that see all of the scene's light are candidates, so that
 whatever the pilot chooses estimates the same image: without light samples a point, spot or
 directional light is never reached, and without direction samples a delta lobe (a mirror, glass,
