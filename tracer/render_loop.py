@@ -330,11 +330,11 @@ def render(scene: Scene, strategy: Strategy, settings: RenderSettings, film: Fil
         film = pooled
     elif pooled is not None:
         film.merge(pooled)
-    film.record = _record(scene, runs, settings, first, drawn, seconds, earlier)
+    ran = estimator.lights.selection if estimator is not None else None
+    film.record = _record(scene, runs, settings, first, drawn, seconds, earlier,
+                          ran if estimator is not None and ran != estimator.lights.requested else None)
     if choice is not None or (earlier is not None and earlier.auto):
         film.record = replace(film.record, auto=choice.summary() if choice else earlier.auto)
-    if estimator is not None and estimator.lights.selection != estimator.lights.requested:
-        film.record = replace(film.record, light_selection_ran=estimator.lights.selection)
     learner = hook.learner if hook is not None else (learner if runs.learns else None)
     if learner is not None:
         film.learned = learner.maps()
@@ -509,11 +509,14 @@ def _check_continues(earlier: RenderRecord, scene: Scene, strategy: Strategy,
 
 
 def _record(scene: Scene, strategy: Strategy, settings: RenderSettings, offset: int, drawn: int,
-            seconds: float, earlier: RenderRecord | None) -> RenderRecord:
+            seconds: float, earlier: RenderRecord | None, selection_ran: str | None = None) -> RenderRecord:
     """The record of a film after a render that drew ``drawn`` sample indices from
-    ``settings.first_sample + offset`` into it: the new range joined to the ``earlier`` record's."""
-    record = RenderRecord.of_render(strategy, settings.sampler, settings.seed, settings.first_sample + offset,
-                                    drawn, seconds, scene)
+    ``settings.first_sample + offset`` into it (its kernels running ``selection_ran``, where
+    that differs from the strategy's selection): the new range joined to the ``earlier``
+    record's, as ``record.merged`` joins them."""
+    record = replace(RenderRecord.of_render(strategy, settings.sampler, settings.seed,
+                                            settings.first_sample + offset, drawn, seconds, scene),
+                     light_selection_ran=selection_ran)
     return merged(record, earlier) if earlier is not None else record
 
 

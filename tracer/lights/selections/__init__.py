@@ -13,9 +13,8 @@ Each module is a plug-in (``tracer.plugins.LightSelection``, pbrt-v4's two-metho
   ``k`` at ``x``, computed as ``choose`` computes it, so that MIS weighs a BSDF sample that hits
   a light with the very probability the light technique would have chosen it;
 - optionally ``runs_as(tables) -> str | None``: the name of a cheaper selection whose choices
-  have the same probabilities as this one's at every point some light can reach, for these
-  tables (a light BVH of one leaf and no lights at infinity picks by power, as ``power`` does,
-  after an importance bound it does not need), or None. ``tracer.lights.build_tables`` then
+  have the same probabilities as this one's at every point, for these tables (a light BVH of
+  one leaf and no lights at infinity picks its members by power, as ``power`` does), or None. ``tracer.lights.build_tables`` then
   builds and runs that one, and the render record says so (``light_selection_ran``).
 
 ==========  ==============================================================================

@@ -119,9 +119,8 @@ def runs_as(tables: BvhTables) -> str | None:
     ``tracer.lights.selections``). Such a tree picks among its leaf's members by their power
     shares, with no bound to test (``tracer.lights.bvh.choose``), and the leaf holds every
     candidate: its pmf is the power pmf at every point. Measured (benchmarks/light_pick.py):
-    its pick cost 39 ns against 2 for the alias table on tracer's Cornell box, and ``mis`` with
-    ``bvh`` lost 15% at equal time to power selection on Mitsuba's (benchmarks/results/
-    equal_time_bvh.md)."""
+    its pick cost 39 ns against 2 for the alias table on tracer's Cornell box; power's kernels
+    are also the ones a ``mis`` render has already compiled."""
     return "power" if len(tables.nodes) == 1 and len(tables.infinite) == 0 else None
 
 
